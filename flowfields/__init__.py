@@ -1,0 +1,8 @@
+"""Flow fields for saltation: LES snapshot datasets in wall units and their Numba sampler.
+
+``open_dataset(path=None)`` opens a dataset folder (None: the shipped LES-WALE channel).
+"""
+from .dataset import DatasetError, FlowDataset, open_dataset, SHIPPED_DATASET
+from .analytic import profile_dataset
+
+__all__ = ["open_dataset", "FlowDataset", "DatasetError", "profile_dataset", "SHIPPED_DATASET"]
