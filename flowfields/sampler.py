@@ -80,7 +80,7 @@ def _locate_y(y, yp):
 
 
 @njit(cache=True)
-def _trilinear(f, it, wt, wdt, i0, i1, wx, j0, j1, wy, dyc, k0, k1, wz, u, g, dudt):
+def _trilinear(f, it, wt, wdt, i0, i1, wx, j0, j1, wy, dyc, k0, k1, wz, u, g, dudt, with_gradient):
     """Add snapshot it of the trilinear interpolant with time weight wt.
 
     u[c] += wt*value, g[c, 0..2] += wt*(d/dx, d/dy, d/dz), dudt[c] += wdt*value
@@ -107,6 +107,8 @@ def _trilinear(f, it, wt, wdt, i0, i1, wx, j0, j1, wy, dyc, k0, k1, wz, u, g, du
         val = b0 + wz * (b1 - b0)
         u[c] += wt * val
         dudt[c] += wdt * val
+        if not with_gradient:
+            continue
         # d/dx
         dx00 = v100 - v000
         dx10 = v110 - v010
@@ -125,10 +127,11 @@ def _trilinear(f, it, wt, wdt, i0, i1, wx, j0, j1, wy, dyc, k0, k1, wz, u, g, du
 
 
 @njit(cache=True)
-def sample_point(f, xp, yp, zp, tp, u, g, dudt):
+def sample_point(f, xp, yp, zp, tp, u, g, dudt, with_gradient=True):
     """Velocity u (3,), gradient g[i, j] = ∂u_i/∂x_j (3, 3) and ∂u/∂t (3,) at one point.
 
-    All in wall units. Returns a status code (OK, ABOVE_TOP, BELOW_WALL)."""
+    All in wall units. Returns a status code (OK, ABOVE_TOP, BELOW_WALL). With
+    with_gradient=False, g is left at zero except in the sublayer (cheaper)."""
     for c in range(3):
         u[c] = 0.0
         dudt[c] = 0.0
@@ -161,11 +164,11 @@ def sample_point(f, xp, yp, zp, tp, u, g, dudt):
         wy = (ys - f.y[j0]) / dyc
     # time: linear, looping
     if f.nt == 1:
-        _trilinear(f, 0, 1.0, 0.0, i0, i1, wx, j0, j1, wy, dyc, k0, k1, wz, u, g, dudt)
+        _trilinear(f, 0, 1.0, 0.0, i0, i1, wx, j0, j1, wy, dyc, k0, k1, wz, u, g, dudt, with_gradient)
     else:
         n0, n1, wt = _locate_periodic(tp, f.t0, f.dt, f.nt)
-        _trilinear(f, n0, 1.0 - wt, -1.0 / f.dt, i0, i1, wx, j0, j1, wy, dyc, k0, k1, wz, u, g, dudt)
-        _trilinear(f, n1, wt, 1.0 / f.dt, i0, i1, wx, j0, j1, wy, dyc, k0, k1, wz, u, g, dudt)
+        _trilinear(f, n0, 1.0 - wt, -1.0 / f.dt, i0, i1, wx, j0, j1, wy, dyc, k0, k1, wz, u, g, dudt, with_gradient)
+        _trilinear(f, n1, wt, 1.0 / f.dt, i0, i1, wx, j0, j1, wy, dyc, k0, k1, wz, u, g, dudt, with_gradient)
     if sublayer:
         # SPEC §3 viscous sublayer between the wall and the first cell centre
         r = yp / y1
@@ -214,4 +217,4 @@ def sample_velocity_many(f, points, tp, u, status):
     for p in prange(n):
         g = np.empty((3, 3))
         d = np.empty(3)
-        status[p] = sample_point(f, points[p, 0], points[p, 1], points[p, 2], tp, u[p], g, d)
+        status[p] = sample_point(f, points[p, 0], points[p, 1], points[p, 2], tp, u[p], g, d, False)

@@ -1,0 +1,148 @@
+"""Command line: ``saltation run | sweep | analyze | validate | flow …`` (SPEC §9)."""
+from __future__ import annotations
+
+import argparse
+import json
+import shlex
+import sys
+from pathlib import Path
+
+
+def _flow_info(args) -> int:
+    from flowfields import open_dataset
+
+    ds = open_dataset(args.dataset)
+    info = ds.describe()
+    if args.json:
+        print(json.dumps(info, indent=1))
+        return 0
+    g, b, s = info["grid"], info["box_plus"], info["spacing_plus"]
+    print(f"dataset        {info['path']}")
+    print(f"kind           {info['kind']}")
+    print(f"Re_tau         {info['re_tau']:.1f}  (from the LES's own wall shear)")
+    print(f"grid           {g['nx']} x {g['ny']} x {g['nz']}  (x, y, z)")
+    print(f"box (wall u.)  Lx+ = {b['Lx']:.1f}, y_top+ = {b['y_top']:.1f}, Lz+ = {b['Lz']:.1f}")
+    hb = info["box_h"]
+    print(f"box (h)        Lx = {hb['Lx']:.3f} h, y_top = {hb['y_top']:.3f} h, Lz = {hb['Lz']:.3f} h")
+    print(f"spacing        dx+ = {s['dx']:.2f}, dz+ = {s['dz']:.2f}, first centre y+ = {s['y_first_centre']:.3f}, max dy+ = {s['dy_max']:.2f}")
+    iv = info["snapshot_interval_plus"]
+    print(f"snapshots      {info['snapshots']} over t+ = {info['time_span_plus']:.1f}" + (f", interval dt+ = {iv:.3f}" if iv else ""))
+    print(f"storage        {info['storage']['dtype']}")
+    prov = info["provenance"]
+    for key in ("openfoam_version", "command", "solver", "les_model"):
+        if key in prov:
+            print(f"{key:<15}{prov[key]}")
+    return 0
+
+
+def _flow_check(args) -> int:
+    from flowfields import open_dataset
+    from flowfields.check import write_profile_check
+
+    ds = open_dataset(args.dataset)
+    out = Path(args.out)
+    summary = write_profile_check(ds, out)
+    print(f"Re_tau = {summary['re_tau']:.1f}; first cell centre at y+ = {summary['first_cell_y_plus']:.3f}")
+    print(f"{'y+':>6} {'u+ (LES)':>9} {'u+ (law)':>9} {'diff':>7}  law")
+    for r in summary["law_of_the_wall"]:
+        print(f"{r['y_plus']:6.0f} {r['u_plus_les']:9.3f} {r['u_plus_law']:9.3f} {100 * r['rel_diff']:6.1f}%  {r['law']}")
+    if "log_region" in summary:
+        lo, hi = summary["log_region"]
+        print(f"log region y+ {lo:.0f}-{hi:.0f}: max |u+/law - 1| = {100 * summary['log_region_max_abs_rel_diff']:.1f}%")
+    print(f"streamwise r.m.s. peak u'+ = {summary['u_rms_peak']:.2f} at y+ = {summary['u_rms_peak_y_plus']:.1f}")
+    print(f"wrote {out / 'profile.csv'}, {out / 'law_of_the_wall.csv'}, {out / 'profile_check.json'}, {out / 'profile.png'}")
+    return 0
+
+
+def _flow_import(args) -> int:
+    from flowfields.importer import import_series
+
+    prov = {"command": "saltation " + " ".join(shlex.quote(a) for a in sys.argv[1:])}
+    path = import_series(args.src, args.out, nu=args.nu, provenance=prov, y_max_plus=args.y_max_plus, dtype=args.dtype)
+    print(f"wrote dataset {path}")
+    return 0
+
+
+def _flow_generate(args) -> int:
+    from flowfields.generate import ChannelParams, generate
+
+    params = ChannelParams(
+        re_tau=args.re_tau,
+        lx_h=args.lx,
+        lz_h=args.lz,
+        nx=args.nx,
+        ny=args.ny,
+        nz=args.nz,
+        first_cell_yplus=args.first_cell_yplus,
+        snapshot_interval_tplus=args.interval,
+        n_snapshots=args.snapshots,
+        spinup_tplus=args.spinup,
+        nprocs=args.np,
+        initial=args.initial,
+    )
+    cmd = "saltation " + " ".join(shlex.quote(a) for a in sys.argv[1:])
+    path = generate(params, args.out, work_dir=args.work_dir, command_line=cmd, y_max_plus=args.y_max_plus, dtype=args.dtype)
+    print(f"wrote dataset {path}")
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="saltation", description="Saltating sand grains in stored LES channel flow.")
+    sub = p.add_subparsers(dest="command", required=True)
+
+    flow = sub.add_parser("flow", help="make, ingest and describe LES datasets")
+    fsub = flow.add_subparsers(dest="flow_command", required=True)
+
+    fi = fsub.add_parser("info", help="grid, Re_tau, time span, snapshot interval of a dataset")
+    fi.add_argument("dataset", nargs="?", default=None, help="dataset folder (default: the shipped one)")
+    fi.add_argument("--json", action="store_true", help="print JSON")
+    fi.set_defaults(func=_flow_info)
+
+    fc = fsub.add_parser("check", help="mean and r.m.s. profiles against the law of the wall (table + figure)")
+    fc.add_argument("dataset", nargs="?", default=None, help="dataset folder (default: the shipped one)")
+    fc.add_argument("--out", default="flow_check", help="output folder (default: ./flow_check)")
+    fc.set_defaults(func=_flow_check)
+
+    fm = fsub.add_parser("import", help="import a foamToVTK / meshio series into a dataset")
+    fm.add_argument("src", help=".vtm.series / .vtu.series / .xdmf file, a VTK folder, or one mesh file")
+    fm.add_argument("--out", required=True, help="dataset folder to write")
+    fm.add_argument("--nu", type=float, required=True, help="kinematic viscosity of the LES (m²/s)")
+    fm.add_argument("--y-max-plus", type=float, default=None, help="keep y+ up to this (default: lower half)")
+    fm.add_argument("--dtype", choices=("float32", "int16"), default="float32")
+    fm.set_defaults(func=_flow_import)
+
+    fg = fsub.add_parser("generate", help="run the project's OpenFOAM LES-WALE channel and import its snapshots")
+    fg.add_argument("--out", required=True, help="dataset folder to write")
+    fg.add_argument("--work-dir", default="les_work", help="where the OpenFOAM case runs (default ./les_work)")
+    fg.add_argument("--re-tau", type=float, default=395.0)
+    fg.add_argument("--lx", type=float, default=4.0, help="Lx/h")
+    fg.add_argument("--lz", type=float, default=2.0, help="Lz/h")
+    fg.add_argument("--nx", type=int, default=48)
+    fg.add_argument("--ny", type=int, default=64)
+    fg.add_argument("--nz", type=int, default=48)
+    fg.add_argument("--first-cell-yplus", type=float, default=0.8)
+    fg.add_argument("--interval", type=float, default=4.0, help="snapshot interval in t+")
+    fg.add_argument("--snapshots", type=int, default=80)
+    fg.add_argument("--spinup", type=float, default=400.0, help="discarded spin-up in t+")
+    fg.add_argument("--np", type=int, default=1, help="MPI ranks (decomposePar + mpirun -np N)")
+    fg.add_argument("--initial", choices=("map", "perturb"), default="map")
+    fg.add_argument("--y-max-plus", type=float, default=None)
+    fg.add_argument("--dtype", choices=("float32", "int16"), default="float32")
+    fg.set_defaults(func=_flow_generate)
+    return p
+
+
+def main(argv=None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    from flowfields.dataset import DatasetError
+
+    try:
+        return int(args.func(args) or 0)
+    except (DatasetError, FileNotFoundError) as exc:
+        print(f"saltation: error: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())
