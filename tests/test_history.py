@@ -1,0 +1,355 @@
+"""Basset history integral: window + exponential tail (saltation/history.py).
+
+Orders are measured, not assumed: each convergence test fits the observed order
+over successive halvings of Δt and checks it against the order the scheme is
+designed for.
+"""
+
+import math
+
+import numpy as np
+import pytest
+from scipy.integrate import quad
+from scipy.special import dawsn, fresnel, wofz
+
+from saltation import history as H
+
+
+# ------------------------------------------------------------------ helpers
+def run_windowed(n_window, dt, n_steps, slip_of_t):
+    """I(t_k), k = 0 … n_steps, from the windowed scheme fed slip(t_k)."""
+    co = H.make_history_coefficients(dt, n_window)
+    s = H.allocate_history_state(1, n_window)
+    sh, me, ta = s.slip_hist[0], s.meta[0], s.tail[0]
+    w = np.zeros(3)
+    out = np.zeros(3)
+    w[:] = slip_of_t(0.0)
+    H.history_reset(w, sh, me, ta)
+    result = np.zeros(n_steps + 1)
+    for k in range(1, n_steps + 1):
+        w[:] = slip_of_t(k * dt)
+        H.history_push(w, sh, me, ta, co.tail_decay, co.tail_c_old, co.tail_c_new)
+        H.history_integral(sh, me, ta, co.window_weights, co.tail_weight, out)
+        result[k] = out[0]
+    return result
+
+
+def observed_order(dts, errors):
+    return np.polyfit(np.log(dts), np.log(np.abs(errors)), 1)[0]
+
+
+def sin_case(omega=2.0, phase=0.7):
+    """u_r = sin(ωτ + φ): I = ω ∫₀ᵗ cos(ω(t-s) + φ) s^-1/2 ds (Fresnel integrals)."""
+    def slip(t):
+        return np.sin(omega * t + phase)
+
+    def deriv(t):
+        return omega * np.cos(omega * t + phase)
+
+    def exact(t):
+        S, C = fresnel(np.sqrt(2 * omega * t / np.pi))
+        f = np.sqrt(2 * np.pi / omega)
+        return omega * f * (np.cos(omega * t + phase) * C + np.sin(omega * t + phase) * S)
+    return slip, deriv, exact
+
+
+def relax_case():
+    """u_r = 1 - e^-τ: I = 2 D(√t), D the Dawson function."""
+    return (lambda t: 1 - np.exp(-t), lambda t: np.exp(-t),
+            lambda t: 2 * dawsn(np.sqrt(t)))
+
+
+def tail_kernel(s, t_win):
+    ti = H.TAIL_TIMES * t_win
+    return np.sum(H.TAIL_WEIGHTS * np.sqrt(np.e / ti) * np.exp(-s / (2 * ti)))
+
+
+def reference_with_tail_kernel(deriv, t, t_win):
+    """What the windowed scheme converges to: exact kernel over the window,
+    the exponential-sum kernel beyond it (scipy quad, s = x² on the window)."""
+    win = quad(lambda x: 2 * deriv(t - x * x), 0, math.sqrt(min(t, t_win)),
+               epsabs=1e-13, epsrel=1e-12, limit=200)[0]
+    if t <= t_win:
+        return win
+    return win + quad(lambda s: deriv(t - s) * tail_kernel(s, t_win), t_win, t,
+                      epsabs=1e-13, epsrel=1e-12, limit=400)[0]
+
+
+# ------------------------------------------------------------------ the weights
+def test_window_weights_are_the_published_beta():
+    """γ = β·D: van Hinsberg's β (closed form) times the finite-difference map."""
+    for n_int, central in ((7, False), (12, True)):
+        dt = 0.3
+        beta = np.zeros(n_int + 1)
+        beta[0] = 4 / 3
+        k = np.arange(1, n_int)
+        beta[1:n_int] = 4 / 3 * ((k - 1) ** 1.5 - 2 * k ** 1.5 + (k + 1) ** 1.5)
+        beta[n_int] = 4 / 3 * ((n_int - 1) ** 1.5 - n_int ** 1.5 + 1.5 * math.sqrt(n_int))
+        D = np.zeros((n_int + 1, n_int + 2))
+        D[0, :3] = [1.5, -2.0, 0.5]
+        for m in range(1, n_int + (1 if central else 0)):
+            D[m, m - 1], D[m, m + 1] = 0.5, -0.5
+        if not central:
+            D[n_int, n_int - 2:n_int + 1] = [-0.5, 2.0, -1.5]
+        gamma = np.zeros(n_int + 2)
+        H._window_weights(n_int, central, dt, gamma)
+        np.testing.assert_allclose(gamma, beta @ D / math.sqrt(dt), rtol=1e-12, atol=1e-12)
+
+
+def test_tail_kernel_fit_accuracy():
+    """Published (t̃ᵢ, aᵢ): s^-1/2 fitted to the documented relative accuracy."""
+    for x, tol in ((1.0, 1e-4), (3.0, 1.5e-3), (10.0, 2.5e-3), (100.0, 7e-3),
+                   (1000.0, 0.04)):
+        assert abs(tail_kernel(x, 1.0) * math.sqrt(x) - 1) < tol
+
+
+def test_prefactor_matches_spec_forms():
+    alpha, tau_star, rp = 1 / 3.15, 0.057, 73.0
+    re_star = math.sqrt(tau_star) * rp
+    p = H.basset_acceleration_prefactor(alpha, re_star)
+    assert p == pytest.approx(9 * alpha / (math.sqrt(math.pi * rp) * tau_star ** 0.25))
+
+
+def test_memory_per_particle():
+    s = H.allocate_history_state(10, 100)
+    per_particle = sum(a.nbytes for a in s) / 10
+    assert per_particle == H.history_state_bytes(100) == 24 * 100 + 304
+
+
+# ------------------------------------------------------------------ exactness
+def test_constant_acceleration_exact():
+    """u_r = aτ: I = 2a√t. Full reference and window are exact (g constant);
+    beyond the window the scheme integrates the exponential-sum kernel exactly."""
+    a, dt, n_w = 3.0, 0.01, 16
+    t = np.arange(201) * dt
+    assert H.full_history_integral(a * t, dt) == pytest.approx(2 * a * math.sqrt(2.0), rel=1e-13)
+    res = run_windowed(n_w, dt, 200, lambda s: a * s)
+    t_win = n_w * dt
+    inside = t[1:n_w + 1]
+    np.testing.assert_allclose(res[1:n_w + 1], 2 * a * np.sqrt(inside), rtol=1e-12)
+    ti = H.TAIL_TIMES * t_win
+    for k in (n_w + 1, 50, 200):
+        tail = a * np.sum(H.TAIL_WEIGHTS * np.sqrt(np.e / ti) * 2 * ti
+                          * (np.exp(-t_win / (2 * ti)) - np.exp(-t[k] / (2 * ti))))
+        assert res[k] == pytest.approx(2 * a * math.sqrt(t_win) + tail, rel=1e-11)
+
+
+def test_linear_acceleration_exact():
+    """u_r = bτ²/2 (du_r/dτ = bτ): I = (4/3) b t^{3/2}, exact for both."""
+    b, dt, n_w = 2.0, 0.02, 20
+    t = np.arange(101) * dt
+    slip = b * t ** 2 / 2
+    for k in (2, 3, 10, 100):
+        assert H.full_history_integral(slip[:k + 1], dt) == pytest.approx(
+            4 / 3 * b * t[k] ** 1.5, rel=1e-12)
+    res = run_windowed(n_w, dt, n_w, lambda s: b * s * s / 2)
+    np.testing.assert_allclose(res[2:], 4 / 3 * b * t[2:n_w + 1] ** 1.5, rtol=1e-12)
+
+
+def test_vector_input_and_zero_history():
+    t = np.arange(11) * 0.1
+    series = np.stack([t, 2 * t, -t], axis=1)
+    out = H.full_history_integral(series, 0.1)
+    np.testing.assert_allclose(out, 2 * math.sqrt(1.0) * np.array([1, 2, -1]), rtol=1e-13)
+    assert H.full_history_integral(np.ones(5), 0.1) == pytest.approx(0.0, abs=1e-14)
+
+
+# ------------------------------------------------------------------ convergence
+@pytest.mark.parametrize("case", [sin_case, relax_case])
+def test_full_reference_is_second_order(case):
+    slip, _, exact = case()
+    T = 2.0
+    ns = np.array([50, 100, 200, 400, 800])
+    errs = np.array([H.full_history_integral(slip(np.arange(n + 1) * T / n), T / n) - exact(T)
+                     for n in ns])
+    p = observed_order(T / ns, errs)
+    assert 1.9 < p < 2.15, (p, errs)
+    assert abs(errs[-1]) < 2e-5
+
+
+@pytest.mark.parametrize("case", [sin_case, relax_case])
+def test_windowed_scheme_is_second_order(case):
+    """Window + tail against the same integral with the tail kernel it uses
+    (so the kernel-fit error, independent of Δt, is not mixed in); t_win fixed,
+    N_w doubles as Δt halves; checked at several times up to 20 windows."""
+    slip, deriv, _ = case()
+    t_win, T = 0.25, 5.0
+    t_check = np.array([0.125, 1.0, 2.5, 5.0])
+    ref = np.array([reference_with_tail_kernel(deriv, t, t_win) for t in t_check])
+    n_ws = np.array([8, 16, 32, 64])
+    errs = []
+    for n_w in n_ws:
+        dt = t_win / n_w
+        res = run_windowed(n_w, dt, int(round(T / dt)), slip)
+        errs.append(np.max(np.abs(res[np.rint(t_check / dt).astype(int)] - ref)))
+    p = observed_order(t_win / n_ws, np.array(errs))
+    assert 1.85 < p < 2.15, (p, errs)
+
+
+@pytest.mark.parametrize("case", [sin_case, relax_case])
+def test_windowed_matches_full_reference_over_20_windows(case):
+    """Window + tail vs the full-history quadrature at every step over 20 window
+    lengths: they differ by the tail-kernel fit only, ≤ 0.3 % of max |I|."""
+    slip, _, exact = case()
+    n_w, t_win = 16, 0.25
+    dt = t_win / n_w
+    n = 20 * n_w
+    t = np.arange(n + 1) * dt
+    res = run_windowed(n_w, dt, n, slip)
+    series = slip(t)
+    full = np.array([H.full_history_integral(series[:k + 1], dt) for k in range(1, n + 1)])
+    scale = np.abs(full).max()
+    diff = np.abs(res[1:] - full)
+    assert diff[:n_w].max() < 1e-13 * scale         # identical inside the first window
+    assert diff.max() < 3e-3 * scale
+    # and both are close to the exact integral
+    assert np.abs(full - exact(t[1:])).max() < 3e-3 * scale
+
+
+def test_reset_forgets_history():
+    n_w, dt = 8, 0.05
+    co = H.make_history_coefficients(dt, n_w)
+    s = H.allocate_history_state(2, n_w)
+    w = np.zeros(3)
+    out = np.zeros(3)
+    # particle 0: long history, then reset; particle 1: fresh
+    for i in (0, 1):
+        H.history_reset(w, s.slip_hist[i], s.meta[i], s.tail[i])
+    for k in range(1, 40):
+        w[:] = [math.sin(k * dt), k * dt, 0.0]
+        H.history_push(w, s.slip_hist[0], s.meta[0], s.tail[0], co.tail_decay,
+                       co.tail_c_old, co.tail_c_new)
+    w[:] = [1.0, -2.0, 0.5]
+    for i in (0, 1):
+        H.history_reset(w, s.slip_hist[i], s.meta[i], s.tail[i])
+    res = []
+    for k in range(1, 30):
+        w[:] = [1.0 + 0.3 * k * dt, -2.0, 0.5 - (k * dt) ** 2]
+        for i in (0, 1):
+            H.history_push(w, s.slip_hist[i], s.meta[i], s.tail[i], co.tail_decay,
+                           co.tail_c_old, co.tail_c_new)
+        r = []
+        for i in (0, 1):
+            H.history_integral(s.slip_hist[i], s.meta[i], s.tail[i], co.window_weights,
+                               co.tail_weight, out)
+            r.append(out.copy())
+        res.append(r)
+    for r0, r1 in res:
+        np.testing.assert_array_equal(r0, r1)
+
+
+# ------------------------------------------------------------------ coupled to RK4
+def _basset_roots(b, c):
+    return np.roots([1.0, c * math.sqrt(math.pi), b]).astype(complex)
+
+
+def _erfc_term(r, t):
+    # e^{r²t} erfc(-r√t) = w(-i r √t), Faddeeva w
+    return wofz(-1j * r * np.sqrt(t))
+
+
+def exact_step_response(A, b, c, t):
+    """du/dt = A - b u - c ∫₀ᵗ u'(τ)(t-τ)^-1/2 dτ, u(0) = 0 (Laplace transform:
+    U = A / (s (s + c√π √s + b)), factorised in √s with roots r1, r2)."""
+    r1, r2 = _basset_roots(b, c)
+    v = A / (r1 - r2) * ((_erfc_term(r1, t) - 1) / r1 - (_erfc_term(r2, t) - 1) / r2)
+    return v.real
+
+
+def exact_ramp_response(A, b, c, t):
+    """Same with forcing A·t (smooth start: u'(0) = 0)."""
+    r1, r2 = _basset_roots(b, c)
+
+    def f2(r):
+        return (((_erfc_term(r, t) - 1) / r - 2 * np.sqrt(t / np.pi)) / r - t) / r
+    return (A / (r1 - r2) * (f2(r1) - f2(r2))).real
+
+
+def rk4_with_history(A, b, c, T, n, n_window, ramp, fluid=None, full=False):
+    """Classic RK4 with the Basset term as history.py documents it: I_n held
+    over the stages, then the implicit trapezoidal step end.  The model is
+    du/dt = A(t) - b (u - U) - c I[u - U], U a uniform steady fluid velocity
+    (zero by default), starting at zero slip: u(0) = U."""
+    dt = T / n
+    co = H.make_history_coefficients(dt, n_window)
+    s = H.allocate_history_state(1, n_window)
+    sh, me, ta = s.slip_hist[0], s.meta[0], s.tail[0]
+    still = np.zeros(3) if fluid is None else np.asarray(fluid, float)
+    u = still.copy()
+    H.history_reset(u - still, sh, me, ta)
+    i_start, acc = np.zeros(3), np.zeros(3)
+
+    def rhs(v, t):
+        acc[:] = (A * t if ramp else A) - b * (v - still)
+        H.add_basset_acceleration(c, i_start, acc)
+        return acc.copy()
+
+    i_carry = np.zeros(3)
+    for k in range(n):
+        t = k * dt
+        H.history_integral(sh, me, ta, co.window_weights, co.tail_weight, i_start)
+        if k > 0:   # the carried I_{n+1} of the previous step end is the same number
+            np.testing.assert_allclose(i_carry, i_start, rtol=1e-10, atol=1e-12)
+        k1 = rhs(u, t)
+        k2 = rhs(u + 0.5 * dt * k1, t + 0.5 * dt)
+        k3 = rhs(u + 0.5 * dt * k2, t + 0.5 * dt)
+        k4 = rhs(u + dt * k3, t + dt)
+        u = u + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+        H.history_end_step(u, still, i_start, c, dt, sh, me, ta, co.window_weights,
+                           co.tail_weight, co.tail_decay, co.tail_c_old, co.tail_c_new,
+                           i_carry)
+    return u if full else u[0]
+
+
+def test_rk4_coupling_uses_the_slip():
+    """Galilean check: in a uniform fluid velocity U the grain's slip evolves as
+    in still fluid (the step end must store u - u_f, not u)."""
+    U = np.array([3.0, -0.5, 1.25])
+    moving = rk4_with_history(1.0, 1.0, 0.5, 2.0, 100, 30, False, fluid=U, full=True)
+    still = rk4_with_history(1.0, 1.0, 0.5, 2.0, 100, 30, False, full=True)
+    np.testing.assert_allclose(moving - U, still, atol=1e-12)
+
+
+def test_exact_basset_solutions_are_consistent():
+    # algebraic approach to the terminal velocity: u ≈ A/b - A c/(b² √t) (small-s
+    # limit of the transform), and the Basset term slows the approach
+    A, b, c = 1.0, 1.0, 0.5
+    t = 400.0
+    assert exact_step_response(A, b, c, t) == pytest.approx(
+        A / b - A * c / (b * b * math.sqrt(t)), abs=1e-4)
+    assert exact_step_response(A, b, c, 2.0) < (A / b) * (1 - math.exp(-2.0))
+    # reference by the full quadrature with a fine step
+    assert rk4_with_history(A, b, c, 2.0, 800, 802, False) == pytest.approx(
+        exact_step_response(A, b, c, 2.0), abs=2e-5)
+
+
+@pytest.mark.parametrize("ramp, order_lo, order_hi", [(False, 1.4, 1.6), (True, 1.8, 2.2)])
+def test_rk4_coupling_order(ramp, order_lo, order_hi):
+    """Combined RK4 + history: order 3/2 when the history starts with a finite
+    acceleration (I ≈ 2g(0)√t: the case after every reset), order 2 for a
+    smooth start.  Window covers the whole run (no kernel-fit error)."""
+    A, b, c, T = 1.0, 1.0, 0.5, 2.0
+    exact = exact_ramp_response(A, b, c, T) if ramp else exact_step_response(A, b, c, T)
+    ns = np.array([100, 200, 400, 800])
+    errs = np.array([rk4_with_history(A, b, c, T, n, n + 2, ramp) - exact for n in ns])
+    p = observed_order(T / ns, errs)
+    assert order_lo < p < order_hi, (p, errs)
+
+
+def test_rk4_coupling_is_stable_for_large_history_prefactor():
+    """The implicit newest-node weight keeps the coupling stable where an
+    explicit (lagged) history term diverges: P = 1, Δt up to 0.8 τ_drag."""
+    A, b, c, T = 1.0, 1.0, 1.0, 40.0
+    exact = exact_step_response(A, b, c, T)
+    for dt in (0.05, 0.2, 0.8):
+        n = int(round(T / dt))
+        assert rk4_with_history(A, b, c, T, n, 50, False) == pytest.approx(exact, abs=0.01)
+
+
+def test_rk4_with_tail_close_to_exact():
+    """With a short window (t_win = T/20) the kernel fit adds ~1e-4 u*: stated
+    tolerance 5e-4 of the velocity."""
+    A, b, c, T = 1.0, 1.0, 0.5, 2.0
+    exact = exact_step_response(A, b, c, T)
+    for n in (200, 400):
+        assert rk4_with_history(A, b, c, T, n, n // 20, False) == pytest.approx(exact, abs=5e-4)
