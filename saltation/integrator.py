@@ -1,0 +1,262 @@
+"""Classic RK4 for saltating grains, parallel over particles (SPEC §2, paper §2.2).
+
+One step of one grain:
+
+1. RK4 on (x, u_p, ϖ_p) with dx/dt = u_p, du_p/dt = Σ forces − P·I_n, dϖ/dt = spin law;
+   the Basset integral I_n is held over the four stages (SPEC §2: the history term is
+   not part of the RK4 right-hand side);
+2. sample the fluid at the new position and time (kept as the next step's stage 1),
+   then close the history term implicitly by the trapezoidal rule and push the new slip
+   (``history.history_end_step``: second order and stable for any P√Δt);
+3. if the grain's centre crossed y = 1/2 (its bottom reached the bed top) while
+   descending: locate the contact by linear interpolation within the step, rebound on a
+   virtual bed grain (bed.py), move on with the new velocity for the rest of the step,
+   close the jump and open the next one; the Basset history restarts (history.py
+   explains why) from the next step's first fluid sample.
+
+State is a structure of arrays (``GrainState``); per-particle scratch space is
+preallocated (``Workspace``) so the hot loop allocates nothing. Random contact angles
+come from a counter-based generator keyed on (seed, particle, impact count): a run is
+bit-for-bit reproducible for a given seed and thread count.
+"""
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+from numba import njit, prange
+
+from . import history
+from .bed import bed_rebound, virtual_bed_normal
+from .flow import fluid_at_grain
+from .forces import BASSET_PREFACTOR, ON_BASSET, R_SUBMERGED, RE_STAR, fluid_acceleration
+from .history import META_COUNT, add_basset_acceleration, history_end_step, history_reset
+from .rng import uniform2
+from .spin import spin_rate
+
+RADIUS = 0.5  # grain radius in particle units
+
+# status codes (per particle)
+OK = 0
+NOT_FINITE = 1
+
+# jump record columns: t_start, length, height, duration
+JUMP_FIELDS = 4
+
+
+class GrainState(NamedTuple):
+    pos: np.ndarray  # (N,3) x, z unwrapped; y of the centre above the bed top (d)
+    vel: np.ndarray  # (N,3) u*
+    spin: np.ndarray  # (N,3) u*/d
+    jump_t0: np.ndarray  # (N,) start time of the current jump (d/u*)
+    jump_x0: np.ndarray  # (N,) streamwise position where it started
+    jump_ymax: np.ndarray  # (N,) highest centre elevation so far in this jump
+    jump_count: np.ndarray  # (N,) int64 completed jumps
+    impacts: np.ndarray  # (N,) int64 bed impacts (random-number counter)
+    jump_buf: np.ndarray  # (N, cap, 4) completed jumps not yet collected
+    jump_buf_n: np.ndarray  # (N,) int64
+    status: np.ndarray  # (N,) int64
+    above_top: np.ndarray  # (N,) int64 steps spent above the stored flow
+    hist_slip: np.ndarray  # (N, N_w+2, 3) Basset window of slip samples (history.py)
+    hist_meta: np.ndarray  # (N, 2) int64 ring-buffer head, samples since reset (0: reset due)
+    hist_tail: np.ndarray  # (N, 10, 3) exponential tail modes
+    hist_i: np.ndarray  # (N, 3) history integral I_n carried between steps
+    fresh: np.ndarray  # (N,) int64: 1 when the workspace holds the fluid at the grain now
+
+
+class Workspace(NamedTuple):
+    uf: np.ndarray
+    grad: np.ndarray
+    dudt: np.ndarray
+    vort: np.ndarray
+    uf_top: np.ndarray
+    uf_bot: np.ndarray
+    sg: np.ndarray
+    sd: np.ndarray
+    acc: np.ndarray
+    dspin: np.ndarray
+    x0: np.ndarray  # (N, 9) state at the start of the step
+    x: np.ndarray  # (N, 9) stage state
+    k: np.ndarray  # (N, 4, 9) stage derivatives
+    normal: np.ndarray
+    basset: np.ndarray
+    slip: np.ndarray
+
+
+def make_workspace(n: int) -> Workspace:
+    e3 = lambda: np.zeros((n, 3))  # noqa: E731
+    return Workspace(
+        e3(), np.zeros((n, 3, 3)), e3(), e3(), e3(), e3(), np.zeros((n, 3, 3)), e3(), e3(), e3(),
+        np.zeros((n, 9)), np.zeros((n, 9)), np.zeros((n, 4, 9)), e3(), e3(), e3(),
+    )
+
+
+def make_state(pos, vel, spin, t0, n_window, jump_capacity=16) -> GrainState:
+    n = len(pos)
+    hs = history.allocate_history_state(n, n_window)
+    return GrainState(
+        np.array(pos, dtype=np.float64),
+        np.array(vel, dtype=np.float64),
+        np.array(spin, dtype=np.float64),
+        np.full(n, float(t0)),
+        np.array(pos, dtype=np.float64)[:, 0].copy(),
+        np.array(pos, dtype=np.float64)[:, 1].copy(),
+        np.zeros(n, dtype=np.int64),
+        np.zeros(n, dtype=np.int64),
+        np.zeros((n, jump_capacity, JUMP_FIELDS)),
+        np.zeros(n, dtype=np.int64),
+        np.zeros(n, dtype=np.int64),
+        np.zeros(n, dtype=np.int64),
+        hs.slip_hist,
+        hs.meta,
+        hs.tail,
+        np.zeros((n, 3)),
+        np.zeros(n, dtype=np.int64),
+    )
+
+
+@njit(cache=True)
+def _sample_fluid(f, coef, t, x, p, w):
+    """Fluid at the grain at stage state x, into the workspace row p."""
+    fluid_at_grain(
+        f, coef[RE_STAR], x[0], x[1], x[2], t, w.uf[p], w.grad[p], w.dudt[p], w.vort[p],
+        w.uf_top[p], w.uf_bot[p], w.sg[p], w.sd[p],
+    )
+
+
+@njit(cache=True)
+def _rhs(coef, x, k, p, w, i_hist):
+    """Right-hand side at stage state x (9,) -> k (9,) with the fluid already sampled;
+    the Basset term −P·I_n (held over the step) is added when switched on."""
+    up = x[3:6]
+    spin = x[6:9]
+    fluid_acceleration(up, w.uf[p], w.grad[p], w.dudt[p], w.vort[p], spin, w.uf_top[p], w.uf_bot[p], coef, w.acc[p])
+    if coef[ON_BASSET] != 0.0:
+        add_basset_acceleration(coef[BASSET_PREFACTOR], i_hist, w.acc[p])
+    spin_rate(spin, w.vort[p], coef[R_SUBMERGED], coef[RE_STAR], w.dspin[p])
+    for i in range(3):
+        k[i] = x[3 + i]
+        k[3 + i] = w.acc[p, i]
+        k[6 + i] = w.dspin[p, i]
+
+
+@njit(cache=True)
+def step_particle(f, coef, bed, seed, st, w, hc, p, t, dt):
+    """One RK4 step of particle p from t to t + dt, with bed impacts (module docstring).
+    hc: history.HistoryCoefficients."""
+    x0 = w.x0[p]
+    x = w.x[p]
+    k = w.k[p]
+    for i in range(3):
+        x0[i] = st.pos[p, i]
+        x0[3 + i] = st.vel[p, i]
+        x0[6 + i] = st.spin[p, i]
+    if st.fresh[p] == 0:
+        _sample_fluid(f, coef, t, x0, p, w)
+    basset = coef[ON_BASSET] != 0.0
+    i_hist = st.hist_i[p]
+    if basset and st.hist_meta[p, META_COUNT] == 0:
+        # (re)start the memory: release or the step after a bed impact
+        for i in range(3):
+            w.slip[p, i] = st.vel[p, i] - w.uf[p, i]
+            i_hist[i] = 0.0
+        history_reset(w.slip[p], st.hist_slip[p], st.hist_meta[p], st.hist_tail[p])
+    _rhs(coef, x0, k[0], p, w, i_hist)
+    for stage in range(1, 4):
+        h = 0.5 * dt if stage < 3 else dt
+        for i in range(9):
+            x[i] = x0[i] + h * k[stage - 1, i]
+        _sample_fluid(f, coef, t + h, x, p, w)
+        _rhs(coef, x, k[stage], p, w, i_hist)
+    for i in range(3):
+        st.pos[p, i] += dt / 6.0 * (k[0, i] + 2.0 * k[1, i] + 2.0 * k[2, i] + k[3, i])
+        st.vel[p, i] += dt / 6.0 * (k[0, 3 + i] + 2.0 * k[1, 3 + i] + 2.0 * k[2, 3 + i] + k[3, 3 + i])
+        st.spin[p, i] += dt / 6.0 * (k[0, 6 + i] + 2.0 * k[1, 6 + i] + 2.0 * k[2, 6 + i] + k[3, 6 + i])
+    for i in range(3):
+        if not (np.isfinite(st.pos[p, i]) and np.isfinite(st.vel[p, i]) and np.isfinite(st.spin[p, i])):
+            st.status[p] = NOT_FINITE
+            return
+    # fluid at the new position: closes the history step and serves as the next stage 1
+    _sample_fluid(f, coef, t + dt, st.pos[p], p, w)
+    st.fresh[p] = 1
+    if basset:
+        history_end_step(
+            st.vel[p], w.uf[p], i_hist, coef[BASSET_PREFACTOR], dt, st.hist_slip[p], st.hist_meta[p],
+            st.hist_tail[p], hc.window_weights, hc.tail_weight, hc.tail_decay, hc.tail_c_old, hc.tail_c_new, i_hist,
+        )
+    y_old = x0[1]
+    y_new = st.pos[p, 1]
+    if y_new < RADIUS:
+        if st.vel[p, 1] < 0.0 and y_old >= RADIUS:
+            _bed_impact(st, w, p, t, dt, y_old, y_new, bed, seed)
+        else:
+            # grazing contact without a descending crossing: keep the grain on the bed
+            st.pos[p, 1] = RADIUS
+            st.fresh[p] = 0
+            if st.vel[p, 1] < 0.0:
+                _bed_impact(st, w, p, t, dt, RADIUS, RADIUS, bed, seed)
+    if st.pos[p, 1] > st.jump_ymax[p]:
+        st.jump_ymax[p] = st.pos[p, 1]
+
+
+@njit(cache=True)
+def _bed_impact(st, w, p, t, dt, y_old, y_new, bed, seed):
+    """Rebound on the virtual rough bed; close the jump; reset the history."""
+    frac = 1.0
+    if y_old - y_new > 0.0:
+        frac = (y_old - RADIUS) / (y_old - y_new)
+        frac = min(max(frac, 0.0), 1.0)
+    # contact point: linear within the step; the end-of-step velocity is the incoming one
+    back = (1.0 - frac) * dt
+    x_hit = st.pos[p, 0] - back * st.vel[p, 0]
+    z_hit = st.pos[p, 2] - back * st.vel[p, 2]
+    t_hit = t + frac * dt
+    # close the jump (SPEC §6): length, height of the grain bottom above the bed top, duration
+    j = st.jump_buf_n[p]
+    if j < st.jump_buf.shape[1]:
+        st.jump_buf[p, j, 0] = st.jump_t0[p]
+        st.jump_buf[p, j, 1] = x_hit - st.jump_x0[p]
+        st.jump_buf[p, j, 2] = st.jump_ymax[p] - RADIUS
+        st.jump_buf[p, j, 3] = t_hit - st.jump_t0[p]
+        st.jump_buf_n[p] = j + 1
+    st.jump_count[p] += 1
+    # rebound on a randomly tilted bed grain (bed.py), then fly on for the rest of the step
+    n = w.normal[p]
+    c = st.impacts[p]
+    xi1, xi2 = uniform2(seed, p, c)
+    virtual_bed_normal(st.vel[p], xi1, xi2, bed[2], n)
+    bed_rebound(st.vel[p], st.spin[p], n, bed[0], bed[1], RADIUS)
+    st.impacts[p] += 1
+    st.pos[p, 0] = x_hit + back * st.vel[p, 0]
+    st.pos[p, 1] = RADIUS + back * st.vel[p, 1]
+    st.pos[p, 2] = z_hit + back * st.vel[p, 2]
+    # open the next jump
+    st.jump_t0[p] = t_hit
+    st.jump_x0[p] = x_hit
+    st.jump_ymax[p] = st.pos[p, 1]
+    st.fresh[p] = 0  # moved: the fluid must be sampled again
+    st.hist_meta[p, META_COUNT] = 0  # the history restarts at the next step
+
+
+@njit(cache=True, parallel=True)
+def advance(f, coef, bed, seed, st, w, hc, t0, dt, n_steps, top):
+    """Advance all grains n_steps from t0. Stops early (returning the steps done) when a
+    grain's state is not finite or a jump buffer is full, so the caller can collect."""
+    n = st.pos.shape[0]
+    cap = st.jump_buf.shape[1]
+    for s in range(n_steps):
+        t = t0 + s * dt
+        for p in prange(n):
+            if st.status[p] != OK:
+                continue
+            step_particle(f, coef, bed, seed, st, w, hc, p, t, dt)
+            if st.pos[p, 1] > top:
+                st.above_top[p] += 1
+        stop = False
+        for p in range(n):
+            if st.status[p] != OK or st.jump_buf_n[p] >= cap:
+                stop = True
+                break
+        if stop:
+            return s + 1
+    return n_steps
