@@ -86,9 +86,79 @@ def _flow_generate(args) -> int:
     return 0
 
 
+def _run(args) -> int:
+    from .run import run
+
+    over = {}
+    for item in args.set or []:
+        if "=" not in item:
+            raise SystemExit(f"saltation: error: --set expects table.key=value, got {item!r}")
+        k, v = item.split("=", 1)
+        over[k.strip()] = v.strip()
+
+    res = run(args.case, out=args.out, progress=not args.quiet, **_typed(over))
+    s = res.summary
+    j = s["jumps"]
+    print(f"run directory  {res.directory}")
+    print(f"grains         {s['n_particles']}  (C = {100 * s['concentration']:.3g} %)  tau*/tau*c = {s['tau_ratio']:.3g}  tau* = {s['tau_star']:.4g}  Re* = {s['re_star']:.2f}")
+    print(f"simulated      {s['simulated_time_s']:.3g} s = {s['simulated_time_particle']:.1f} d/u*  ({s['steps']} steps)")
+    if j["count"]:
+        print(f"jumps          {j['count']} counted (first {j['discarded_first_per_particle']} per grain dropped)")
+        print(f"  H/d = {j['H_mean']:.2f} ± {j['H_std']:.2f}   L/d = {j['L_mean']:.2f} ± {j['L_std']:.2f}   U/u* = {j['U_mean']:.2f} ± {j['U_std']:.2f}")
+    else:
+        print(f"jumps          none counted yet ({j['recorded']} recorded; each grain's first {j['discarded_first_per_particle']} are dropped)")
+    t = s["timing"]
+    print(f"timing         wall {t['wall_s']:.1f} s (compile {t['compile_s']:.1f} s), {s['particle_steps_per_s']:.3g} particle-steps/s on {t['threads']} thread(s)")
+    return 0
+
+
+def _typed(over: dict) -> dict:
+    """--set values are TOML values (numbers, booleans, strings; bare words are strings)."""
+    import tomllib
+
+    out = {}
+    for k, v in over.items():
+        try:
+            out[k] = tomllib.loads(f"v = {v}")["v"]
+        except tomllib.TOMLDecodeError:
+            out[k] = v
+    return out
+
+
+def _validate(args) -> int:
+    from .validate import run_validation
+
+    res = run_validation(args.out, data=args.data, duration_scale=args.duration_scale, ablation=not args.no_ablation)
+    print(f"{'tau*/tau*c':>10} {'jumps':>6} {'H/d':>12} {'vR':>5} {'L/d':>13} {'vR':>5} {'U/u*':>12} {'vR':>5}")
+    for r in res["validation"]:
+        print(f"{r['tau_ratio']:10.2f} {r['count']:6d} {r['H_mean']:6.2f}±{r['H_std']:<5.2f} {r['H_vanrijn']:5.2f} "
+              f"{r['L_mean']:6.2f}±{r['L_std']:<6.2f} {r['L_vanrijn']:5.2f} {r['U_mean']:6.2f}±{r['U_std']:<5.2f} {r['U_vanrijn']:5.2f}")
+    if "ablation" in res:
+        print("force ablation at tau*/tau*c = 1.79 (change vs all forces on):")
+        for r in res["ablation"]:
+            print(f"  {r['variant']:<24} H {r['H_change_pct']:+6.1f} %   L {r['L_change_pct']:+6.1f} %   U {r['U_change_pct']:+6.1f} %")
+    print(f"wrote {args.out}/validation.csv, validation.png" + (", ablation.csv" if "ablation" in res else ""))
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="saltation", description="Saltating sand grains in stored LES channel flow.")
     sub = p.add_subparsers(dest="command", required=True)
+
+    r = sub.add_parser("run", help="one simulation; writes a run directory")
+    r.add_argument("case", help="case file (TOML)")
+    r.add_argument("--out", default=None, help="run directory (default: output.directory or runs/NAME)")
+    r.add_argument("--set", action="append", metavar="TABLE.KEY=VALUE", help="override a case-file key (repeatable)")
+    r.add_argument("--quiet", action="store_true", help="no progress bar")
+    r.set_defaults(func=_run)
+
+    v = sub.add_parser("validate", help="single-grain validation cases and their comparison table/figure")
+    v.add_argument("which", choices=("nino-garcia",))
+    v.add_argument("--data", default=None, help="experimental CSV (columns: source, tau_ratio, H_mean, H_std, L_mean, L_std, U_mean, U_std)")
+    v.add_argument("--out", default="validation", help="output folder (default ./validation)")
+    v.add_argument("--duration-scale", type=float, default=1.0, help="scale the cases' durations (quick looks)")
+    v.add_argument("--no-ablation", action="store_true", help="skip the force-ablation runs")
+    v.set_defaults(func=_validate)
 
     flow = sub.add_parser("flow", help="make, ingest and describe LES datasets")
     fsub = flow.add_subparsers(dest="flow_command", required=True)
@@ -137,9 +207,12 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     from flowfields.dataset import DatasetError
 
+    from .config import CaseError
+    from .run import SimulationError
+
     try:
         return int(args.func(args) or 0)
-    except (DatasetError, FileNotFoundError) as exc:
+    except (DatasetError, CaseError, SimulationError, FileNotFoundError) as exc:
         print(f"saltation: error: {exc}", file=sys.stderr)
         return 2
 
