@@ -116,6 +116,16 @@ class Simulation:
         self.top_d = float(flow.y[-1]) / self.re_star
 
     # ------------------------------------------------------------------ helpers
+    SERIAL_BELOW = 2000  # grains: below this a step is too short to share between threads
+
+    def threads(self) -> int:
+        """run.threads, or (0 = auto) all cores — one thread for small runs, where the
+        per-step hand-over between threads costs more than the step."""
+        most = numba.config.NUMBA_NUM_THREADS
+        if self.case.run.threads:
+            return min(self.case.run.threads, most)
+        return 1 if self.n < self.SERIAL_BELOW else most
+
     def _initial_state(self):
         c = self.case
         pos, vel, spin = initial_conditions(self.n, self.domain_d, c.run.seed, c.run.release_height)
@@ -155,8 +165,7 @@ class Simulation:
         c = self.case
         self.out.mkdir(parents=True, exist_ok=True)
         (self.out / "config.toml").write_text(dump_toml(c))
-        if c.run.threads:
-            numba.set_num_threads(min(c.run.threads, numba.config.NUMBA_NUM_THREADS))
+        numba.set_num_threads(self.threads())
         threads = numba.get_num_threads()
         st = self._initial_state()
         ws = make_workspace(self.n)
