@@ -22,6 +22,20 @@ stretched in y (wall at y = 0). Everything here is in wall units (x⁺, y⁺, z�
 
 The grid and data travel as a ``FlowArrays`` named tuple, which Numba passes to
 ``@njit`` functions as a plain tuple of arrays and numbers.
+
+How the kernels are made fast (they run four times per grain and time step):
+
+* the two bracketing snapshots are blended per grid node on the raw (possibly int16)
+  values, then one trilinear pass gives the value, its gradient and its change over
+  the snapshot interval; scale and offset (quantization) are applied once at the end;
+* ``sample_column`` samples a grain's centre (with gradient) and its top and bottom
+  (velocity only) on one vertical: x, z and time are located once;
+* the y search is a binary search of fixed trip count with a conditional move;
+* the public kernels are compiled without reference counting (``_nrt=False``: they
+  take arrays and allocate nothing, and an atomic increment/decrement per array
+  argument and per view costs more than the arithmetic) and with fused multiply-add
+  contraction (``fastmath={"contract"}``: round-off-level changes only; no assumption
+  about NaN or infinity, so non-finite data still propagate and are detected).
 """
 from __future__ import annotations
 
@@ -53,142 +67,241 @@ class FlowArrays(NamedTuple):
     nt: int
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", error_model="numpy")
 def _locate_periodic(s, s0, ds, n):
-    """Index of the lower neighbour and the weight of the upper one on a periodic axis."""
+    """Index of the lower neighbour and the weight of the upper one on a periodic axis.
+    Any input (even a non-finite one) gives indices inside [0, n)."""
     q = (s - s0) / ds
     fl = np.floor(q)
     w = q - fl
     i = int(fl) % n
     if i < 0:
         i += n
-    return i, (i + 1) % n, w
+    i1 = i + 1
+    if i1 >= n:
+        i1 = 0
+    return i, i1, w
 
 
 @njit(cache=True, inline="always")
 def _locate_y(y, yp):
-    """Index j with y[j] <= yp < y[j+1] (binary search); yp inside [y[0], y[-1]]."""
+    """The largest j <= len(y) - 2 with y[j] <= yp, for yp in [y[0], y[-1]]: the cell
+    y[j] <= yp < y[j+1] (j = len(y) - 2 at the top). Binary search whose trip count
+    depends on len(y) only, the step a conditional move: no mispredicted branches."""
     lo = 0
-    hi = y.shape[0] - 1
-    while hi - lo > 1:
-        mid = (lo + hi) // 2
-        if y[mid] <= yp:
-            lo = mid
-        else:
-            hi = mid
+    n = y.shape[0] - 1
+    while n > 1:
+        half = n >> 1
+        if y[lo + half] <= yp:
+            lo += half
+        n -= half
     return lo
 
 
-@njit(cache=True)
-def _trilinear(f, it, wt, wdt, i0, i1, wx, j0, j1, wy, dyc, k0, k1, wz, u, g, dudt, with_gradient):
-    """Add snapshot it of the trilinear interpolant with time weight wt.
-
-    u[c] += wt*value, g[c, 0..2] += wt*(d/dx, d/dy, d/dz), dudt[c] += wdt*value
-    (dyc = y[j1]-y[j0]; no y-derivative when dyc == 0, i.e. a single plane)."""
-    d = f.data
-    for c in range(3):
-        sc = f.scale[c]
-        of = f.offset[c]
-        v000 = d[it, i0, j0, k0, c] * sc + of
-        v100 = d[it, i1, j0, k0, c] * sc + of
-        v010 = d[it, i0, j1, k0, c] * sc + of
-        v110 = d[it, i1, j1, k0, c] * sc + of
-        v001 = d[it, i0, j0, k1, c] * sc + of
-        v101 = d[it, i1, j0, k1, c] * sc + of
-        v011 = d[it, i0, j1, k1, c] * sc + of
-        v111 = d[it, i1, j1, k1, c] * sc + of
-        # interpolate in x first
-        a00 = v000 + wx * (v100 - v000)
-        a10 = v010 + wx * (v110 - v010)
-        a01 = v001 + wx * (v101 - v001)
-        a11 = v011 + wx * (v111 - v011)
-        b0 = a00 + wy * (a10 - a00)
-        b1 = a01 + wy * (a11 - a01)
-        val = b0 + wz * (b1 - b0)
-        u[c] += wt * val
-        dudt[c] += wdt * val
-        if not with_gradient:
-            continue
-        # d/dx
-        dx00 = v100 - v000
-        dx10 = v110 - v010
-        dx01 = v101 - v001
-        dx11 = v111 - v011
-        ex0 = dx00 + wy * (dx10 - dx00)
-        ex1 = dx01 + wy * (dx11 - dx01)
-        g[c, 0] += wt * (ex0 + wz * (ex1 - ex0)) / f.dx
-        # d/dy
-        if dyc > 0.0:
-            ey0 = a10 - a00
-            ey1 = a11 - a01
-            g[c, 1] += wt * (ey0 + wz * (ey1 - ey0)) / dyc
-        # d/dz
-        g[c, 2] += wt * (b1 - b0) / f.dz
-
-
-@njit(cache=True)
-def sample_point(f, xp, yp, zp, tp, u, g, dudt, with_gradient=True):
-    """Velocity u (3,), gradient g[i, j] = ∂u_i/∂x_j (3, 3) and ∂u/∂t (3,) at one point.
-
-    All in wall units. Returns a status code (OK, ABOVE_TOP, BELOW_WALL). With
-    with_gradient=False, g is left at zero except in the sublayer (cheaper)."""
-    for c in range(3):
-        u[c] = 0.0
-        dudt[c] = 0.0
-        for k in range(3):
-            g[c, k] = 0.0
-    if yp < 0.0:
-        return BELOW_WALL
-    status = OK
+@njit(cache=True, inline="always", error_model="numpy")
+def _wall_normal(f, yp):
+    """Where the height yp falls on the stretched y axis:
+    (status, j0, j1, wy, dyc, sublayer) with dyc = y[j1] - y[j0] (0 for a single plane).
+    Heights are clamped to [y[0], y[-1]]; ``sublayer`` flags yp < y[0] (SPEC §3)."""
     ny = f.y.shape[0]
     y1 = f.y[0]
-    ytop = f.y[ny - 1]
+    status = OK
     ys = yp
-    if ys > ytop:
-        ys = ytop
+    if yp < 0.0:
+        status = BELOW_WALL
+    if ys > f.y[ny - 1]:
+        ys = f.y[ny - 1]
         status = ABOVE_TOP
     sublayer = ys < y1
     if sublayer:
         ys = y1
-    i0, i1, wx = _locate_periodic(xp, f.x0, f.dx, f.nx)
-    k0, k1, wz = _locate_periodic(zp, f.z0, f.dz, f.nz)
     if ny == 1:
-        j0 = 0
-        j1 = 0
-        wy = 0.0
-        dyc = 0.0
-    else:
-        j0 = _locate_y(f.y, ys)
-        j1 = j0 + 1
-        dyc = f.y[j1] - f.y[j0]
-        wy = (ys - f.y[j0]) / dyc
-    # time: linear, looping
-    if f.nt == 1:
-        _trilinear(f, 0, 1.0, 0.0, i0, i1, wx, j0, j1, wy, dyc, k0, k1, wz, u, g, dudt, with_gradient)
-    else:
-        n0, n1, wt = _locate_periodic(tp, f.t0, f.dt, f.nt)
-        _trilinear(f, n0, 1.0 - wt, -1.0 / f.dt, i0, i1, wx, j0, j1, wy, dyc, k0, k1, wz, u, g, dudt, with_gradient)
-        _trilinear(f, n1, wt, 1.0 / f.dt, i0, i1, wx, j0, j1, wy, dyc, k0, k1, wz, u, g, dudt, with_gradient)
+        return status, 0, 0, 0.0, 0.0, sublayer
+    j0 = _locate_y(f.y, ys)
+    dyc = f.y[j0 + 1] - f.y[j0]
+    return status, j0, j0 + 1, (ys - f.y[j0]) / dyc, dyc, sublayer
+
+
+@njit(cache=True, inline="always")
+def _node(d, n0, n1, wt, i, j, k, c):
+    """Stored (raw, possibly quantized) component c at grid node (i, j, k), linear in time
+    between snapshots n0 and n1 (weight wt on n1), and its change from n0 to n1."""
+    a = np.float64(d[n0, i, j, k, c])
+    b = np.float64(d[n1, i, j, k, c])
+    return a + wt * (b - a), b - a
+
+
+@njit(cache=True, inline="always")
+def _component(d, n0, n1, wt, i0, i1, wx, j0, j1, wy, k0, k1, wz, c):
+    """Raw trilinear value of component c (time-interpolated)."""
+    v000, _ = _node(d, n0, n1, wt, i0, j0, k0, c)
+    v100, _ = _node(d, n0, n1, wt, i1, j0, k0, c)
+    v010, _ = _node(d, n0, n1, wt, i0, j1, k0, c)
+    v110, _ = _node(d, n0, n1, wt, i1, j1, k0, c)
+    v001, _ = _node(d, n0, n1, wt, i0, j0, k1, c)
+    v101, _ = _node(d, n0, n1, wt, i1, j0, k1, c)
+    v011, _ = _node(d, n0, n1, wt, i0, j1, k1, c)
+    v111, _ = _node(d, n0, n1, wt, i1, j1, k1, c)
+    a00 = v000 + wx * (v100 - v000)
+    a10 = v010 + wx * (v110 - v010)
+    a01 = v001 + wx * (v101 - v001)
+    a11 = v011 + wx * (v111 - v011)
+    b0 = a00 + wy * (a10 - a00)
+    b1 = a01 + wy * (a11 - a01)
+    return b0 + wz * (b1 - b0)
+
+
+@njit(cache=True, inline="always")
+def _component_with_gradient(d, n0, n1, wt, i0, i1, wx, j0, j1, wy, k0, k1, wz, c):
+    """Raw trilinear value of component c, its derivatives along the three index axes
+    (per cell: multiply by 1/dx, 1/dyc, 1/dz) and its change over the snapshot interval."""
+    v000, e000 = _node(d, n0, n1, wt, i0, j0, k0, c)
+    v100, e100 = _node(d, n0, n1, wt, i1, j0, k0, c)
+    v010, e010 = _node(d, n0, n1, wt, i0, j1, k0, c)
+    v110, e110 = _node(d, n0, n1, wt, i1, j1, k0, c)
+    v001, e001 = _node(d, n0, n1, wt, i0, j0, k1, c)
+    v101, e101 = _node(d, n0, n1, wt, i1, j0, k1, c)
+    v011, e011 = _node(d, n0, n1, wt, i0, j1, k1, c)
+    v111, e111 = _node(d, n0, n1, wt, i1, j1, k1, c)
+    # value: interpolate in x, then y, then z
+    a00 = v000 + wx * (v100 - v000)
+    a10 = v010 + wx * (v110 - v010)
+    a01 = v001 + wx * (v101 - v001)
+    a11 = v011 + wx * (v111 - v011)
+    b0 = a00 + wy * (a10 - a00)
+    b1 = a01 + wy * (a11 - a01)
+    val = b0 + wz * (b1 - b0)
+    # exact derivatives of the trilinear interpolant
+    dx00 = v100 - v000
+    dx10 = v110 - v010
+    dx01 = v101 - v001
+    dx11 = v111 - v011
+    ex0 = dx00 + wy * (dx10 - dx00)
+    ex1 = dx01 + wy * (dx11 - dx01)
+    ey0 = a10 - a00
+    ey1 = a11 - a01
+    # change over the snapshot interval (the time interpolant's slope times dt)
+    f00 = e000 + wx * (e100 - e000)
+    f10 = e010 + wx * (e110 - e010)
+    f01 = e001 + wx * (e101 - e001)
+    f11 = e011 + wx * (e111 - e011)
+    h0 = f00 + wy * (f10 - f00)
+    h1 = f01 + wy * (f11 - f01)
+    return val, ex0 + wz * (ex1 - ex0), ey0 + wz * (ey1 - ey0), b1 - b0, h0 + wz * (h1 - h0)
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _gradient_at(f, n0, n1, wt, i0, i1, wx, j0, j1, wy, dyc, k0, k1, wz, u, g, dudt):
+    """u, g, ∂u/∂t (u⁺ units) at a located point inside the stored y range."""
+    d = f.data
+    inv_dx = 1.0 / f.dx
+    inv_dz = 1.0 / f.dz
+    inv_dy = 1.0 / dyc if dyc > 0.0 else 0.0  # a single plane: no y-derivative
+    inv_dt = 1.0 / f.dt if f.nt > 1 else 0.0
+    for c in range(3):
+        val, ex, ey, ez, et = _component_with_gradient(d, n0, n1, wt, i0, i1, wx, j0, j1, wy, k0, k1, wz, c)
+        sc = f.scale[c]
+        u[c] = val * sc + f.offset[c]
+        g[c, 0] = ex * sc * inv_dx
+        g[c, 1] = ey * sc * inv_dy
+        g[c, 2] = ez * sc * inv_dz
+        dudt[c] = et * sc * inv_dt
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _sublayer_with_gradient(yp, y1, u, g, dudt):
+    # SPEC §3 viscous sublayer between the wall and the first cell centre
+    r = yp / y1
+    u1x = u[0]
+    u1y = u[1]
+    u1z = u[2]
+    u[0] = yp + r * (u1x - y1)
+    u[1] = r * u1y
+    u[2] = r * u1z
+    for c in range(3):
+        dudt[c] = r * dudt[c]
+        g[c, 0] = r * g[c, 0]
+        g[c, 2] = r * g[c, 2]
+    g[0, 1] = 1.0 + (u1x - y1) / y1
+    g[1, 1] = u1y / y1
+    g[2, 1] = u1z / y1
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _velocity_at_height(f, n0, n1, wt, i0, i1, wx, k0, k1, wz, yp, u):
+    """Velocity only (u⁺) at height yp with the x, z and time location already known.
+    Zero below the wall. Returns the status code."""
+    status, j0, j1, wy, _, sublayer = _wall_normal(f, yp)
+    if status == BELOW_WALL:
+        u[0] = 0.0
+        u[1] = 0.0
+        u[2] = 0.0
+        return status
+    d = f.data
+    for c in range(3):
+        u[c] = _component(d, n0, n1, wt, i0, i1, wx, j0, j1, wy, k0, k1, wz, c) * f.scale[c] + f.offset[c]
     if sublayer:
-        # SPEC §3 viscous sublayer between the wall and the first cell centre
+        y1 = f.y[0]
         r = yp / y1
-        u1x = u[0]
-        u1y = u[1]
-        u1z = u[2]
-        u[0] = yp + r * (u1x - y1)
-        u[1] = r * u1y
-        u[2] = r * u1z
+        u[0] = yp + r * (u[0] - y1)
+        u[1] = r * u[1]
+        u[2] = r * u[2]
+    return status
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _gradient_at_height(f, n0, n1, wt, i0, i1, wx, k0, k1, wz, yp, u, g, dudt):
+    """u, g, ∂u/∂t (wall units) at height yp with the x, z and time location known."""
+    status, j0, j1, wy, dyc, sublayer = _wall_normal(f, yp)
+    if status == BELOW_WALL:
         for c in range(3):
-            dudt[c] = r * dudt[c]
-            g[c, 0] = r * g[c, 0]
-            g[c, 2] = r * g[c, 2]
-        g[0, 1] = 1.0 + (u1x - y1) / y1
-        g[1, 1] = u1y / y1
-        g[2, 1] = u1z / y1
+            u[c] = 0.0
+            dudt[c] = 0.0
+            for k in range(3):
+                g[c, k] = 0.0
+        return status
+    _gradient_at(f, n0, n1, wt, i0, i1, wx, j0, j1, wy, dyc, k0, k1, wz, u, g, dudt)
+    if sublayer:
+        _sublayer_with_gradient(yp, f.y[0], u, g, dudt)
     if status == ABOVE_TOP:
         # the top value is held constant above the range: no y-derivative there
         for c in range(3):
             g[c, 1] = 0.0
+    return status
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _locate_xzt(f, xp, zp, tp):
+    """Periodic x and z cells and the looping time interval of a point."""
+    i0, i1, wx = _locate_periodic(xp, f.x0, f.dx, f.nx)
+    k0, k1, wz = _locate_periodic(zp, f.z0, f.dz, f.nz)
+    if f.nt == 1:
+        return i0, i1, wx, k0, k1, wz, 0, 0, 0.0
+    n0, n1, wt = _locate_periodic(tp, f.t0, f.dt, f.nt)
+    return i0, i1, wx, k0, k1, wz, n0, n1, wt
+
+
+@njit(cache=True, error_model="numpy", _nrt=False, fastmath={"contract"})
+def sample_point(f, xp, yp, zp, tp, u, g, dudt, with_gradient=True):
+    """Velocity u (3,), gradient g[i, j] = ∂u_i/∂x_j (3, 3) and ∂u/∂t (3,) at one point.
+
+    All in wall units. Returns a status code (OK, ABOVE_TOP, BELOW_WALL). With
+    with_gradient=False only u is written (cheaper); g and dudt are left as they are."""
+    i0, i1, wx, k0, k1, wz, n0, n1, wt = _locate_xzt(f, xp, zp, tp)
+    if with_gradient:
+        return _gradient_at_height(f, n0, n1, wt, i0, i1, wx, k0, k1, wz, yp, u, g, dudt)
+    return _velocity_at_height(f, n0, n1, wt, i0, i1, wx, k0, k1, wz, yp, u)
+
+
+@njit(cache=True, error_model="numpy", _nrt=False, fastmath={"contract"})
+def sample_column(f, xp, yp, zp, tp, y_top, y_bottom, u, g, dudt, u_top, u_bottom):
+    """``sample_point`` with gradient at (xp, yp, zp) plus the velocity alone at the heights
+    y_top and y_bottom of the same vertical (x, z and time located once).
+    Velocities at points below the wall are zero. Returns the status of the centre."""
+    i0, i1, wx, k0, k1, wz, n0, n1, wt = _locate_xzt(f, xp, zp, tp)
+    status = _gradient_at_height(f, n0, n1, wt, i0, i1, wx, k0, k1, wz, yp, u, g, dudt)
+    _velocity_at_height(f, n0, n1, wt, i0, i1, wx, k0, k1, wz, y_top, u_top)
+    _velocity_at_height(f, n0, n1, wt, i0, i1, wx, k0, k1, wz, y_bottom, u_bottom)
     return status
 
 
@@ -212,9 +325,9 @@ def sample_many(f, points, tp, u, g, dudt, status):
 
 @njit(cache=True, parallel=True)
 def sample_velocity_many(f, points, tp, u, status):
-    """Parallel over points: velocity only (the gradient comes for free but is dropped)."""
+    """Parallel over points: velocity only."""
     n = points.shape[0]
+    g = np.empty((3, 3))  # not written with_gradient=False
+    d = np.empty(3)
     for p in prange(n):
-        g = np.empty((3, 3))
-        d = np.empty(3)
         status[p] = sample_point(f, points[p, 0], points[p, 1], points[p, 2], tp, u[p], g, d, False)

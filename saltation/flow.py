@@ -7,32 +7,34 @@ The particle's y is measured from the bed top, which is the LES wall (y⁺ = 0).
 """
 from __future__ import annotations
 
-import numpy as np
 from numba import njit
 
-from flowfields.sampler import ABOVE_TOP, BELOW_WALL, sample_point, vorticity_from_gradient
+from flowfields.sampler import ABOVE_TOP, sample_column, sample_point, vorticity_from_gradient
 
 
-@njit(cache=True)
-def fluid_at_grain(f, re_star, x, y, z, t, uf, grad, dudt, vort, uf_top, uf_bot, scratch_g, scratch_d):
-    """Fluid velocity, gradient, ∂u/∂t and vorticity at the grain centre, and the fluid
-    velocity at its top and bottom (y ± 1/2, zero below the bed; SPEC §2 lift).
+@njit(cache=True, error_model="numpy", _nrt=False)
+def fluid_at_grain(f, re_star, x, y, z, t, with_lift, uf, grad, dudt, vort, uf_top, uf_bot):
+    """Fluid velocity, gradient, ∂u/∂t and vorticity at the grain centre, and (with_lift)
+    the fluid velocity at its top and bottom (y ± 1/2, zero below the bed; SPEC §2 lift).
+    Without lift uf_top and uf_bot are not written (the lift term does not read them).
 
-    Returns 1 if the centre lies above the stored flow (the top value is used), else 0."""
+    The three heights share one vertical of the flow: x, z and time are located once
+    (``sampler.sample_column``). Returns 1 if the centre lies above the stored flow (the
+    top value is used), else 0."""
     xp = x * re_star
+    yp = y * re_star
     zp = z * re_star
     tp = t * re_star
-    status = sample_point(f, xp, y * re_star, zp, tp, uf, grad, dudt)
+    if with_lift:
+        status = sample_column(f, xp, yp, zp, tp, (y + 0.5) * re_star, (y - 0.5) * re_star,
+                               uf, grad, dudt, uf_top, uf_bot)
+    else:
+        status = sample_point(f, xp, yp, zp, tp, uf, grad, dudt)
     for i in range(3):
         dudt[i] *= re_star
         for j in range(3):
             grad[i, j] *= re_star
     vorticity_from_gradient(grad, vort)
-    sample_point(f, xp, (y + 0.5) * re_star, zp, tp, uf_top, scratch_g, scratch_d, False)
-    sb = sample_point(f, xp, (y - 0.5) * re_star, zp, tp, uf_bot, scratch_g, scratch_d, False)
-    if sb == BELOW_WALL:
-        for i in range(3):
-            uf_bot[i] = 0.0
     return 1 if status == ABOVE_TOP else 0
 
 

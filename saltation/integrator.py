@@ -29,7 +29,7 @@ from numba import njit, prange
 from . import history
 from .bed import bed_rebound, virtual_bed_normal
 from .flow import fluid_at_grain
-from .forces import BASSET_PREFACTOR, ON_BASSET, R_SUBMERGED, RE_STAR, fluid_acceleration
+from .forces import BASSET_PREFACTOR, ON_BASSET, ON_LIFT, R_SUBMERGED, RE_STAR, fluid_acceleration
 from .history import META_COUNT, add_basset_acceleration, history_end_step, history_reset
 from .rng import uniform2
 from .spin import spin_rate
@@ -65,28 +65,28 @@ class GrainState(NamedTuple):
 
 
 class Workspace(NamedTuple):
-    uf: np.ndarray
-    grad: np.ndarray
-    dudt: np.ndarray
-    vort: np.ndarray
-    uf_top: np.ndarray
-    uf_bot: np.ndarray
-    sg: np.ndarray
-    sd: np.ndarray
-    acc: np.ndarray
-    dspin: np.ndarray
+    # the fluid at the grain (particle units), kept between steps: stage 1 of the next step
+    uf: np.ndarray  # (N,3) velocity at the centre
+    grad: np.ndarray  # (N,3,3) ∂u_i/∂x_j
+    dudt: np.ndarray  # (N,3) ∂u/∂t
+    vort: np.ndarray  # (N,3) vorticity
+    uf_top: np.ndarray  # (N,3) velocity at y + 1/2 (lift)
+    uf_bot: np.ndarray  # (N,3) velocity at y - 1/2 (lift)
+    # scratch within a step
+    acc: np.ndarray  # (N,3) fluid-force acceleration of a stage
+    dspin: np.ndarray  # (N,3) spin rate of a stage
     x0: np.ndarray  # (N, 9) state at the start of the step
     x: np.ndarray  # (N, 9) stage state
     k: np.ndarray  # (N, 4, 9) stage derivatives
-    normal: np.ndarray
-    basset: np.ndarray
-    slip: np.ndarray
+    normal: np.ndarray  # (N,3) bed contact normal
+    basset: np.ndarray  # (N,3) history acceleration −P·I_n held over the step
+    slip: np.ndarray  # (N,3) slip velocity at a history reset
 
 
 def make_workspace(n: int) -> Workspace:
     e3 = lambda: np.zeros((n, 3))  # noqa: E731
     return Workspace(
-        e3(), np.zeros((n, 3, 3)), e3(), e3(), e3(), e3(), np.zeros((n, 3, 3)), e3(), e3(), e3(),
+        e3(), np.zeros((n, 3, 3)), e3(), e3(), e3(), e3(), e3(), e3(),
         np.zeros((n, 9)), np.zeros((n, 9)), np.zeros((n, 4, 9)), e3(), e3(), e3(),
     )
 
@@ -115,91 +115,109 @@ def make_state(pos, vel, spin, t0, n_window, jump_capacity=16) -> GrainState:
     )
 
 
-@njit(cache=True)
-def _sample_fluid(f, coef, t, x, p, w):
-    """Fluid at the grain at stage state x, into the workspace row p."""
-    fluid_at_grain(
-        f, coef[RE_STAR], x[0], x[1], x[2], t, w.uf[p], w.grad[p], w.dudt[p], w.vort[p],
-        w.uf_top[p], w.uf_bot[p], w.sg[p], w.sd[p],
-    )
+# Speed. Every call of a compiled function that takes arrays, and every view of an array
+# row, costs Numba an atomic reference-count increment and decrement per array: with ~40
+# arrays in play per grain and stage that was more than the arithmetic. step_particle
+# and the flow kernels are therefore compiled without reference counting (_nrt=False;
+# they allocate nothing, every array they touch is owned by the caller of advance), and
+# the per-stage helper is inlined into it. step_particle itself is a call, not inlined
+# into advance's prange body: Numba 0.68 drops writes made by parfor-inlined code through
+# a named tuple's arrays (st.status[p] = ...).
 
 
-@njit(cache=True)
-def _rhs(coef, x, k, p, w, i_hist):
+@njit(cache=True, inline="always")
+def _rhs(coef, x, basset, uf, grad, dudt, vort, uf_top, uf_bot, acc, dspin, k):
     """Right-hand side at stage state x (9,) -> k (9,) with the fluid already sampled;
-    the Basset term −P·I_n (held over the step) is added when switched on."""
+    basset: the history acceleration −P·I_n held over the step (zeros when off)."""
     up = x[3:6]
     spin = x[6:9]
-    fluid_acceleration(up, w.uf[p], w.grad[p], w.dudt[p], w.vort[p], spin, w.uf_top[p], w.uf_bot[p], coef, w.acc[p])
-    if coef[ON_BASSET] != 0.0:
-        add_basset_acceleration(coef[BASSET_PREFACTOR], i_hist, w.acc[p])
-    spin_rate(spin, w.vort[p], coef[R_SUBMERGED], coef[RE_STAR], w.dspin[p])
+    fluid_acceleration(up, uf, grad, dudt, vort, spin, uf_top, uf_bot, coef, acc)
+    spin_rate(spin, vort, coef[R_SUBMERGED], coef[RE_STAR], dspin)
     for i in range(3):
         k[i] = x[3 + i]
-        k[3 + i] = w.acc[p, i]
-        k[6 + i] = w.dspin[p, i]
+        k[3 + i] = acc[i] + basset[i]
+        k[6 + i] = dspin[i]
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy", _nrt=False)
 def step_particle(f, coef, bed, seed, st, w, hc, p, t, dt):
     """One RK4 step of particle p from t to t + dt, with bed impacts (module docstring).
     hc: history.HistoryCoefficients."""
+    re_star = coef[RE_STAR]
+    with_lift = coef[ON_LIFT] != 0.0
+    with_basset = coef[ON_BASSET] != 0.0
+    pos = st.pos[p]
+    vel = st.vel[p]
+    spin = st.spin[p]
     x0 = w.x0[p]
     x = w.x[p]
     k = w.k[p]
+    uf = w.uf[p]
+    grad = w.grad[p]
+    dudt = w.dudt[p]
+    vort = w.vort[p]
+    uf_top = w.uf_top[p]
+    uf_bot = w.uf_bot[p]
+    acc = w.acc[p]
+    dspin = w.dspin[p]
+    basset = w.basset[p]
     for i in range(3):
-        x0[i] = st.pos[p, i]
-        x0[3 + i] = st.vel[p, i]
-        x0[6 + i] = st.spin[p, i]
+        x0[i] = pos[i]
+        x0[3 + i] = vel[i]
+        x0[6 + i] = spin[i]
     if st.fresh[p] == 0:
-        _sample_fluid(f, coef, t, x0, p, w)
-    basset = coef[ON_BASSET] != 0.0
+        fluid_at_grain(f, re_star, x0[0], x0[1], x0[2], t, with_lift, uf, grad, dudt, vort, uf_top, uf_bot)
     i_hist = st.hist_i[p]
-    if basset and st.hist_meta[p, META_COUNT] == 0:
-        # (re)start the memory: release or the step after a bed impact
-        for i in range(3):
-            w.slip[p, i] = st.vel[p, i] - w.uf[p, i]
-            i_hist[i] = 0.0
-        history_reset(w.slip[p], st.hist_slip[p], st.hist_meta[p], st.hist_tail[p])
-    _rhs(coef, x0, k[0], p, w, i_hist)
+    for i in range(3):
+        basset[i] = 0.0
+    if with_basset:
+        if st.hist_meta[p, META_COUNT] == 0:
+            # (re)start the memory: release or the step after a bed impact
+            slip = w.slip[p]
+            for i in range(3):
+                slip[i] = vel[i] - uf[i]
+                i_hist[i] = 0.0
+            history_reset(slip, st.hist_slip[p], st.hist_meta[p], st.hist_tail[p])
+        add_basset_acceleration(coef[BASSET_PREFACTOR], i_hist, basset)
+    _rhs(coef, x0, basset, uf, grad, dudt, vort, uf_top, uf_bot, acc, dspin, k[0])
     for stage in range(1, 4):
         h = 0.5 * dt if stage < 3 else dt
         for i in range(9):
             x[i] = x0[i] + h * k[stage - 1, i]
-        _sample_fluid(f, coef, t + h, x, p, w)
-        _rhs(coef, x, k[stage], p, w, i_hist)
+        fluid_at_grain(f, re_star, x[0], x[1], x[2], t + h, with_lift, uf, grad, dudt, vort, uf_top, uf_bot)
+        _rhs(coef, x, basset, uf, grad, dudt, vort, uf_top, uf_bot, acc, dspin, k[stage])
     for i in range(3):
-        st.pos[p, i] += dt / 6.0 * (k[0, i] + 2.0 * k[1, i] + 2.0 * k[2, i] + k[3, i])
-        st.vel[p, i] += dt / 6.0 * (k[0, 3 + i] + 2.0 * k[1, 3 + i] + 2.0 * k[2, 3 + i] + k[3, 3 + i])
-        st.spin[p, i] += dt / 6.0 * (k[0, 6 + i] + 2.0 * k[1, 6 + i] + 2.0 * k[2, 6 + i] + k[3, 6 + i])
+        pos[i] += dt / 6.0 * (k[0, i] + 2.0 * k[1, i] + 2.0 * k[2, i] + k[3, i])
+        vel[i] += dt / 6.0 * (k[0, 3 + i] + 2.0 * k[1, 3 + i] + 2.0 * k[2, 3 + i] + k[3, 3 + i])
+        spin[i] += dt / 6.0 * (k[0, 6 + i] + 2.0 * k[1, 6 + i] + 2.0 * k[2, 6 + i] + k[3, 6 + i])
     for i in range(3):
-        if not (np.isfinite(st.pos[p, i]) and np.isfinite(st.vel[p, i]) and np.isfinite(st.spin[p, i])):
+        if not (np.isfinite(pos[i]) and np.isfinite(vel[i]) and np.isfinite(spin[i])):
             st.status[p] = NOT_FINITE
             return
     # fluid at the new position: closes the history step and serves as the next stage 1
-    _sample_fluid(f, coef, t + dt, st.pos[p], p, w)
+    fluid_at_grain(f, re_star, pos[0], pos[1], pos[2], t + dt, with_lift, uf, grad, dudt, vort, uf_top, uf_bot)
     st.fresh[p] = 1
-    if basset:
+    if with_basset:
         history_end_step(
-            st.vel[p], w.uf[p], i_hist, coef[BASSET_PREFACTOR], dt, st.hist_slip[p], st.hist_meta[p],
+            vel, uf, i_hist, coef[BASSET_PREFACTOR], dt, st.hist_slip[p], st.hist_meta[p],
             st.hist_tail[p], hc.window_weights, hc.tail_weight, hc.tail_decay, hc.tail_c_old, hc.tail_c_new, i_hist,
         )
     y_old = x0[1]
-    y_new = st.pos[p, 1]
+    y_new = pos[1]
     if y_new < RADIUS:
-        if st.vel[p, 1] < 0.0 and y_old >= RADIUS:
+        if vel[1] < 0.0 and y_old >= RADIUS:
             _bed_impact(st, w, p, t, dt, y_old, y_new, bed, seed)
         else:
             # grazing contact without a descending crossing: keep the grain on the bed
-            st.pos[p, 1] = RADIUS
+            pos[1] = RADIUS
             st.fresh[p] = 0
-            if st.vel[p, 1] < 0.0:
+            if vel[1] < 0.0:
                 _bed_impact(st, w, p, t, dt, RADIUS, RADIUS, bed, seed)
-    if st.pos[p, 1] > st.jump_ymax[p]:
-        st.jump_ymax[p] = st.pos[p, 1]
+    if pos[1] > st.jump_ymax[p]:
+        st.jump_ymax[p] = pos[1]
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy", _nrt=False)
 def _bed_impact(st, w, p, t, dt, y_old, y_new, bed, seed):
     """Rebound on the virtual rough bed; close the jump; reset the history."""
     frac = 1.0
@@ -238,7 +256,7 @@ def _bed_impact(st, w, p, t, dt, y_old, y_new, bed, seed):
     st.hist_meta[p, META_COUNT] = 0  # the history restarts at the next step
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, parallel=True, error_model="numpy")
 def advance(f, coef, bed, seed, st, w, hc, t0, dt, n_steps, top):
     """Advance all grains n_steps from t0. Stops early (returning the steps done) when a
     grain's state is not finite or a jump buffer is full, so the caller can collect."""
