@@ -1,0 +1,322 @@
+"""Cell partitioning and neighbour lists for grain–grain contacts (SPEC §5).
+
+The particle domain is a box ``[0, Lx) × [0, Ly) × [0, Lz)`` in particle units (d = 1).
+``x`` and ``z`` are periodic; ``y`` (wall-normal, measured from the bed top) is bounded
+by default. Positions may be **unwrapped** along periodic axes (the saltation state keeps
+x and z continuous): every function here wraps them itself and measures pair separations
+by the minimum-image convention.
+
+Bounded axes (``y`` unless the grid is made fully periodic) are **clamped**, not grown:
+a grain above ``Ly`` (or below 0) is filed in the top (bottom) layer of cells. Clamping
+is monotone and moves a cell index by at most what the position moved, so two grains
+within one cell width still land in the same or adjacent layers and no contact is
+missed; grains far above the grid only cost time (they all share the top layer). Pick
+``Ly`` a little above the highest expected jump to keep that layer thin.
+
+Cells are at least ``min_size`` wide (the contact cutoff: one diameter, plus the Verlet
+skin when a neighbour list is kept). A periodic axis must be at least two cutoffs long,
+so that one image of a grain at most is within reach (minimum image is then exact); an
+axis with only one or two cells visits each neighbour cell once (no double counting).
+
+Counting sort (``build_cells``): the cell id of every grain is computed in parallel; the
+histogram, prefix sum and scatter run serially. Numba has no atomics for a parallel
+histogram; the race-free alternative (per-thread histograms, a blocked parallel prefix
+sum over (cell, thread), per-thread scatter) was measured on this project's 2-core
+machine for 100 000 grains in 1.3 M cells (4 % solids, 1 d cells): serial sort 4.0 ms,
+per-thread version 12.4 ms on one thread and 24.5 ms on two (the per-thread histograms
+multiply the passes over the mostly empty cells). So the sort stays serial; with a
+Verlet skin it runs only when the neighbour list is rebuilt. The sort is stable: grains
+in one cell are listed in increasing id, so everything built on it is deterministic.
+
+Arrays (N grains, C = nx·ny·nz cells; the linear cell id is ``(ix·ny + iy)·nz + iz``):
+
+- ``cell_of`` (N,) int64: the cell of each grain;
+- ``cell_start`` (C,) int64, ``cell_count`` (C,) int64: the grains of cell c are
+  ``order[cell_start[c] : cell_start[c] + cell_count[c]]``;
+- ``order`` (N,) int64: grain ids sorted by cell (also a good memory order for the state).
+
+Neighbour list (``build_neighbour_list``): full (each pair listed from both sides, so a
+kernel that sums each grain's own force is race-free), fixed capacity ``K`` per grain:
+``nbr`` (N, K) int32 and ``nbr_count`` (N,) (any integer type); the true count is returned so the
+caller can grow ``K`` and rebuild when it was too small. The 27-cell (3×3×3) stencil,
+wrapped on periodic axes and clipped on bounded ones, is visited in a fixed order.
+Cost is linear in N at fixed density.
+"""
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+from numba import njit, prange
+
+__all__ = [
+    "CellGrid",
+    "make_grid",
+    "cell_index",
+    "build_cells",
+    "stencil_cells",
+    "min_image",
+    "build_neighbour_list",
+    "neighbour_pairs",
+    "allocate_cells",
+]
+
+
+class CellGrid(NamedTuple):
+    n: np.ndarray  # (3,) int64 cells per axis (x, y, z)
+    size: np.ndarray  # (3,) float64 cell edge (d), ≥ the cutoff it was made for
+    box: np.ndarray  # (3,) float64 box lengths Lx, Ly, Lz (d)
+    periodic: np.ndarray  # (3,) int64, 1 for a periodic axis
+
+
+def make_grid(box, min_size, periodic=(True, False, True), max_cells=None) -> CellGrid:
+    """Cells of edge ≥ ``min_size`` filling ``box`` = (Lx, Ly, Lz) (particle units).
+
+    ``max_cells``: optional cap on the total number of cells (cells are made coarser,
+    never finer, to respect it). Raises ValueError for a periodic axis shorter than two
+    cells' worth of ``min_size`` (minimum image would be ambiguous).
+    """
+    box = np.asarray(box, dtype=np.float64)
+    per = np.asarray(periodic, dtype=np.int64)
+    if box.shape != (3,) or per.shape != (3,):
+        raise ValueError("box and periodic must have three entries (x, y, z)")
+    if not (min_size > 0.0) or np.any(~(box > 0.0)):
+        raise ValueError(f"box {box.tolist()} and min_size {min_size!r} must be positive")
+    for a in range(3):
+        if per[a] and box[a] < 2.0 * min_size:
+            raise ValueError(f"periodic axis {'xyz'[a]} of length {box[a]!r} is shorter than "
+                             f"twice the cutoff {min_size!r}: minimum image is ambiguous")
+    n = np.maximum(1, np.floor(box / min_size)).astype(np.int64)
+    if max_cells is not None:
+        while int(np.prod(n)) > max_cells:
+            a = int(np.argmax(n))
+            n[a] = max(1, n[a] // 2)
+    return CellGrid(n, box / n, box, per)
+
+
+def allocate_cells(n_particles: int, grid: CellGrid):
+    """(cell_of, cell_start, cell_count, order) arrays for ``build_cells``."""
+    nc = int(np.prod(grid.n))
+    return (np.zeros(n_particles, np.int64), np.zeros(nc, np.int64), np.zeros(nc, np.int64),
+            np.zeros(n_particles, np.int64))
+
+
+@njit(cache=True, inline="always")
+def _axis_index(x, n, size, length, periodic):
+    if periodic:
+        s = x - length * math.floor(x / length)
+        k = int(s / size)
+        if k >= n:  # s rounded up to L
+            k = n - 1
+        elif k < 0:
+            k = 0
+        return k
+    f = math.floor(x / size)
+    if f < 0.0:
+        return 0
+    if f >= n:
+        return n - 1
+    return int(f)
+
+
+@njit(cache=True)
+def cell_index(grid, x, y, z):
+    """Linear cell id of the point (x, y, z) (wrapped on periodic axes, clamped otherwise)."""
+    n, h, b, p = grid.n, grid.size, grid.box, grid.periodic
+    ix = _axis_index(x, n[0], h[0], b[0], p[0])
+    iy = _axis_index(y, n[1], h[1], b[1], p[1])
+    iz = _axis_index(z, n[2], h[2], b[2], p[2])
+    return (ix * n[1] + iy) * n[2] + iz
+
+
+@njit(cache=True, parallel=True)
+def _cell_ids(pos, grid, cell_of):
+    n, h, b, p = grid.n, grid.size, grid.box, grid.periodic
+    nx, ny, nz = n[0], n[1], n[2]
+    hx, hy, hz = h[0], h[1], h[2]
+    lx, ly, lz = b[0], b[1], b[2]
+    px, py, pz = p[0], p[1], p[2]
+    for i in prange(pos.shape[0]):
+        ix = _axis_index(pos[i, 0], nx, hx, lx, px)
+        iy = _axis_index(pos[i, 1], ny, hy, ly, py)
+        iz = _axis_index(pos[i, 2], nz, hz, lz, pz)
+        cell_of[i] = (ix * ny + iy) * nz + iz
+
+
+@njit(cache=True)
+def _counting_sort(cell_of, cell_start, cell_count, order):
+    cell_count[:] = 0
+    for i in range(cell_of.shape[0]):
+        cell_count[cell_of[i]] += 1
+    run = 0
+    for c in range(cell_count.shape[0]):
+        cell_start[c] = run
+        run += cell_count[c]
+    for i in range(cell_of.shape[0]):  # scatter, using cell_start as the cursor
+        c = cell_of[i]
+        order[cell_start[c]] = i
+        cell_start[c] += 1
+    for c in range(cell_count.shape[0]):
+        cell_start[c] -= cell_count[c]
+
+
+@njit(cache=True)
+def build_cells(pos, grid, cell_of, cell_start, cell_count, order):
+    """Counting sort of the grains into cells (module docstring)."""
+    _cell_ids(pos, grid, cell_of)
+    _counting_sort(cell_of, cell_start, cell_count, order)
+
+
+@njit(cache=True, inline="always")
+def _layers(k, n, periodic):
+    """Neighbouring layer indices of layer k along an axis of n layers, each once:
+    (how many, first, second, third)."""
+    if periodic:
+        if n >= 3:
+            return 3, (k - 1 if k > 0 else n - 1), k, (k + 1 if k < n - 1 else 0)
+        if n == 2:
+            return 2, 0, 1, 1
+        return 1, 0, 0, 0
+    if n == 1:
+        return 1, 0, 0, 0
+    if k == 0:
+        return 2, 0, 1, 1
+    if k == n - 1:
+        return 2, k - 1, k, k
+    return 3, k - 1, k, k + 1
+
+
+@njit(cache=True, inline="always")
+def _pick(s, a, b, c):
+    if s == 0:
+        return a
+    if s == 1:
+        return b
+    return c
+
+
+@njit(cache=True)
+def stencil_cells(grid, c, out):
+    """The distinct cells of the 3×3×3 stencil around cell c, into ``out`` (≥ 27 long);
+    returns how many. Periodic axes wrap, bounded axes are clipped; fixed order."""
+    ny, nz = grid.n[1], grid.n[2]
+    ix = c // (ny * nz)
+    iy = (c // nz) % ny
+    iz = c % nz
+    mx, x0, x1, x2 = _layers(ix, grid.n[0], grid.periodic[0])
+    my, y0, y1, y2 = _layers(iy, ny, grid.periodic[1])
+    mz, z0, z1, z2 = _layers(iz, nz, grid.periodic[2])
+    m = 0
+    for a in range(mx):
+        xa = _pick(a, x0, x1, x2)
+        for b in range(my):
+            yb = _pick(b, y0, y1, y2)
+            for g in range(mz):
+                out[m] = (xa * ny + yb) * nz + _pick(g, z0, z1, z2)
+                m += 1
+    return m
+
+
+@njit(cache=True, inline="always")
+def min_image(dx, length, periodic):
+    """Minimum-image separation along one axis. Exactly antisymmetric in dx for every
+    pair closer than half the box (both grains of a pair see the negated value)."""
+    if periodic:
+        return dx - length * math.floor(dx / length + 0.5)
+    return dx
+
+
+@njit(cache=True, parallel=True)
+def build_neighbour_list(pos, grid, cell_of, cell_start, cell_count, order, cutoff, nbr, nbr_count):
+    """Full neighbour list: every j ≠ i with |x_i − x_j| < cutoff (minimum image).
+
+    Writes up to K = nbr.shape[1] neighbours per grain into ``nbr[i]`` and the true
+    number into ``nbr_count[i]``; returns the largest count (> K: rebuild with a larger
+    K, the rows are then truncated). Neighbours are listed in stencil order, then id
+    order within a cell. Needs ``build_cells`` on the same positions first.
+
+    Works cell by cell (parallel over cells; a grain belongs to one cell, so each row is
+    written by one iteration) on a copy of the positions in cell order: marching through
+    the cells reads the stencil's cells and grains from nearby memory whatever the
+    order of the grains in the caller's arrays.
+    """
+    n = pos.shape[0]
+    cap = nbr.shape[1]
+    rc2 = cutoff * cutoff
+    lx, ly, lz = grid.box[0], grid.box[1], grid.box[2]
+    px, py, pz = grid.periodic[0], grid.periodic[1], grid.periodic[2]
+    nx, ny, nz = grid.n[0], grid.n[1], grid.n[2]
+    sorted_pos = np.empty((n, 3))
+    for q in prange(n):
+        i = order[q]
+        sorted_pos[q, 0] = pos[i, 0]
+        sorted_pos[q, 1] = pos[i, 1]
+        sorted_pos[q, 2] = pos[i, 2]
+    n_cells = cell_count.shape[0]
+    largest = np.zeros(n_cells, np.int64)
+    for ci in prange(n_cells):
+        if cell_count[ci] == 0:
+            continue
+        mx, x0, x1, x2 = _layers(ci // (ny * nz), nx, px)
+        my, y0, y1, y2 = _layers((ci // nz) % ny, ny, py)
+        mz, z0, z1, z2 = _layers(ci % nz, nz, pz)
+        most = 0
+        for qi in range(cell_start[ci], cell_start[ci] + cell_count[ci]):
+            i = order[qi]
+            xi, yi, zi = sorted_pos[qi, 0], sorted_pos[qi, 1], sorted_pos[qi, 2]
+            cnt = 0
+            for s in range(mx * my * mz):
+                g = s % mz
+                b = (s // mz) % my
+                a = s // (mz * my)
+                c = (_pick(a, x0, x1, x2) * ny + _pick(b, y0, y1, y2)) * nz + _pick(g, z0, z1, z2)
+                for q in range(cell_start[c], cell_start[c] + cell_count[c]):
+                    if q == qi:
+                        continue
+                    dx = min_image(xi - sorted_pos[q, 0], lx, px)
+                    dy = min_image(yi - sorted_pos[q, 1], ly, py)
+                    dz = min_image(zi - sorted_pos[q, 2], lz, pz)
+                    if dx * dx + dy * dy + dz * dz < rc2:
+                        if cnt < cap:
+                            nbr[i, cnt] = order[q]
+                        cnt += 1
+            nbr_count[i] = cnt
+            if cnt > most:
+                most = cnt
+        largest[ci] = most
+    return largest.max() if n > 0 else 0
+
+
+@njit(cache=True)
+def _pairs_from_list(nbr, nbr_count, total):
+    out = np.empty((total, 2), np.int64)
+    m = 0
+    for i in range(nbr.shape[0]):
+        for k in range(min(nbr_count[i], nbr.shape[1])):
+            j = nbr[i, k]
+            if j > i:
+                out[m, 0] = i
+                out[m, 1] = j
+                m += 1
+    return out[:m]
+
+
+def neighbour_pairs(pos, grid: CellGrid, cutoff: float) -> np.ndarray:
+    """All pairs (i < j) closer than ``cutoff`` (minimum image), as an (M, 2) int64 array
+    sorted by i then stencil order: the cell search, for tests and diagnostics."""
+    pos = np.ascontiguousarray(pos, dtype=np.float64)
+    if np.any(grid.size < cutoff * (1.0 - 1e-12)):
+        raise ValueError(f"cells {grid.size.tolist()} are narrower than the cutoff {cutoff!r}")
+    n = len(pos)
+    cell_of, cell_start, cell_count, order = allocate_cells(n, grid)
+    build_cells(pos, grid, cell_of, cell_start, cell_count, order)
+    cap = 16
+    while True:
+        nbr = np.empty((n, cap), np.int32)
+        cnt = np.zeros(n, np.int64)
+        most = build_neighbour_list(pos, grid, cell_of, cell_start, cell_count, order, cutoff, nbr, cnt)
+        if most <= cap:
+            break
+        cap = int(most)
+    return _pairs_from_list(nbr, cnt, int(cnt.sum()))
