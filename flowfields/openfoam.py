@@ -756,8 +756,9 @@ def map_tutorial_velocity(case: Path, source: Path, *, lx: float, lz: float, h: 
     write_transport_properties(stage, 2e-5)
     write_velocity_field(stage, np.zeros(3), tutorial_patch_names=True)
     run_block_mesh(stage, commands)
-    # Only the target's own fields are mapped onto; copy just U so the tutorial's
-    # k, B, nuTilda, nut, p aren't created.
+    # mapFields also creates the tutorial's other fields (p, nut, k, B, nuTilda) in the
+    # intermediate case; only U is taken from it (p follows from the first pressure
+    # solve, nut from WALE).
     src_fields_ok = (Path(source) / "0" / "U.gz").exists() or (Path(source) / "0" / "U").exists()
     if not src_fields_ok:
         raise OpenFOAMError(f"no 0/U in the mapping source {source}")
