@@ -50,7 +50,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from flowfields import open_dataset, profile_dataset  # noqa: E402
-from flowfields.dataset import write_dataset  # noqa: E402
+from flowfields.dataset import DatasetError, write_dataset  # noqa: E402
 from saltation import history  # noqa: E402
 from saltation.config import load_case, resolve_domain  # noqa: E402
 from saltation.flow import fluid_at_grain  # noqa: E402
@@ -167,18 +167,12 @@ class Setup:
         """n grains: copies of the spun-up population shifted at random in x and z."""
         n0 = len(st0.pos)
         reps = -(-n // n0)
+        st = GrainState(*(np.concatenate([a] * reps)[:n].copy() for a in st0))
         rng = np.random.default_rng(12345)
-        arrays = []
-        for name, a in zip(GrainState._fields, st0):
-            b = np.concatenate([a] * reps)[:n].copy()
-            arrays.append(b)
-        st = GrainState(*arrays)
-        shift_x = np.repeat(rng.uniform(0, self.domain_d[0], reps), n0)[:n]
-        shift_z = np.repeat(rng.uniform(0, self.domain_d[1], reps), n0)[:n]
-        shift_x[:n0] = 0.0
-        shift_z[:n0] = 0.0
-        for a, col, s in ((st.pos, 0, shift_x), (st.pos, 2, shift_z)):
-            a[:, col] += s
+        shift_x = np.repeat(np.r_[0.0, rng.uniform(0, self.domain_d[0], reps - 1)], n0)[:n]
+        shift_z = np.repeat(np.r_[0.0, rng.uniform(0, self.domain_d[1], reps - 1)], n0)[:n]
+        st.pos[:, 0] += shift_x
+        st.pos[:, 2] += shift_z
         st.jump_x0[:] += shift_x
         st.fresh[:] = 0  # the fluid cache is per grain: sample afresh
         st.jump_buf_n[:] = 0
@@ -309,7 +303,10 @@ def main():
     path = args.dataset
     if args.synthetic:
         path = synthetic_channel(args.synthetic)
-    case, ds = make_case(path)
+    try:
+        case, ds = make_case(path)
+    except DatasetError as exc:
+        sys.exit(f"{exc}\n(no dataset: try --synthetic DIR for a synthetic one of the shipped shape)")
     sizes = [int(float(v)) for v in args.n.split(",")]
     thread_list = [t for t in (int(v) for v in args.threads.split(",")) if t <= numba.config.NUMBA_NUM_THREADS]
 
