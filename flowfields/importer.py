@@ -170,6 +170,7 @@ def detect_tensor_grid(pos: np.ndarray, where: str):
                     "the channel must be uniform and periodic in x and z"
                 )
     idx = []
+    raw_axes = list(axes)
     for a, ax in enumerate(axes):
         i = np.clip(np.searchsorted(ax, pos[:, a] - tol), 0, len(ax) - 1)
         if np.any(np.abs(ax[i] - pos[:, a]) > tol):
@@ -178,11 +179,20 @@ def detect_tensor_grid(pos: np.ndarray, where: str):
     flat = (idx[0] * ny + idx[1]) * nz + idx[2]
     if np.bincount(flat, minlength=nx * ny * nz).max() != 1:
         raise SnapshotError(f"{where}: two cells share one grid position: not a tensor-product mesh")
+    # foamToVTK writes Float32 points: x and z lines scatter by ~1e-6 of their spacing.
+    # Snap them to exact uniform lines (least-squares fit) so the periodic sampler sees one dx, dz.
+    for a in (0, 2):
+        ax = raw_axes[a]
+        if len(ax) > 1:
+            k = np.arange(len(ax))
+            slope, x0 = np.polyfit(k, ax, 1)
+            axes[a] = x0 + slope * k
     return axes, flat
 
 
 # ---------------------------------------------------------------------- import
-def import_series(src, out, *, nu, provenance=None, y_max_plus=None, dtype="float32", u_tau=None, progress=True):
+def import_series(src, out, *, nu, provenance=None, y_max_plus=None, dtype="float32", u_tau=None, progress=True,
+                  max_snapshots=None):
     """Import an LES snapshot series into a dataset folder ``out`` (wall units).
 
     nu: kinematic viscosity (m²/s, or the LES's own unit). y_max_plus: keep the lower
@@ -193,8 +203,12 @@ def import_series(src, out, *, nu, provenance=None, y_max_plus=None, dtype="floa
 
     if nu is None or not nu > 0:
         raise ValueError(f"nu (kinematic viscosity) must be positive, got {nu}")
+    if max_snapshots is not None and not int(max_snapshots) >= 1:
+        raise ValueError(f"max_snapshots must be at least 1, got {max_snapshots!r}")
     src = Path(src)
     entries = list_snapshots(src)
+    if max_snapshots is not None and len(entries) > 1:
+        entries = entries[: int(max_snapshots)]
     if len(entries) == 1 and src.suffix.lower() in (".xdmf", ".xmf"):
         stream = _iter_xdmf(src)
     else:
@@ -204,6 +218,8 @@ def import_series(src, out, *, nu, provenance=None, y_max_plus=None, dtype="floa
     bar = tqdm(stream, total=len(entries) if len(entries) > 1 else None, desc="import", unit="snap", disable=not progress)
     rows = []
     for n, (t, (pos, u, wl)) in enumerate(bar):
+        if max_snapshots is not None and n >= int(max_snapshots):
+            break
         where = f"{entries[min(n, len(entries) - 1)][1]}"
         if grid is None:
             axes, flat = detect_tensor_grid(pos, where)

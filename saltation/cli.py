@@ -29,9 +29,16 @@ def _flow_info(args) -> int:
     print(f"snapshots      {info['snapshots']} over t+ = {info['time_span_plus']:.1f}" + (f", interval dt+ = {iv:.3f}" if iv else ""))
     print(f"storage        {info['storage']['dtype']}")
     prov = info["provenance"]
-    for key in ("openfoam_version", "command", "solver", "les_model"):
-        if key in prov:
-            print(f"{key:<15}{prov[key]}")
+    solver = prov.get("solver")
+    rows = [
+        ("OpenFOAM", prov.get("openfoam_version")),
+        ("solver", f"{solver.get('application')}; {solver.get('les_model')}" if isinstance(solver, dict) else solver),
+        ("made by", prov.get("les_command_line") or prov.get("command")),
+        ("imported by", prov.get("import_command")),
+    ]
+    for label, value in rows:
+        if value:
+            print(f"{label:<15}{value}")
     return 0
 
 
@@ -57,8 +64,13 @@ def _flow_check(args) -> int:
 def _flow_import(args) -> int:
     from flowfields.importer import import_series
 
-    prov = {"command": "saltation " + " ".join(shlex.quote(a) for a in sys.argv[1:])}
-    path = import_series(args.src, args.out, nu=args.nu, provenance=prov, y_max_plus=args.y_max_plus, dtype=args.dtype)
+    prov = {}
+    if args.provenance:
+        prov = json.loads(Path(args.provenance).read_text())
+        prov["les_command_line"] = prov.pop("command_line", None)
+    prov["import_command"] = "saltation " + " ".join(shlex.quote(a) for a in sys.argv[1:])
+    path = import_series(args.src, args.out, nu=args.nu, provenance=prov, y_max_plus=args.y_max_plus, dtype=args.dtype,
+                         max_snapshots=args.max_snapshots)
     print(f"wrote dataset {path}")
     return 0
 
@@ -179,6 +191,9 @@ def build_parser() -> argparse.ArgumentParser:
     fm.add_argument("--nu", type=float, required=True, help="kinematic viscosity of the LES (m²/s)")
     fm.add_argument("--y-max-plus", type=float, default=None, help="keep y+ up to this (default: lower half)")
     fm.add_argument("--dtype", choices=("float32", "int16"), default="float32")
+    fm.add_argument("--max-snapshots", type=int, default=None, help="keep only the first N snapshots")
+    fm.add_argument("--provenance", default=None,
+                    help="JSON file with the LES's provenance (the generator writes provenance.json) to store with the data")
     fm.set_defaults(func=_flow_import)
 
     fg = fsub.add_parser("generate", help="run the project's OpenFOAM LES-WALE channel and import its snapshots")
@@ -189,11 +204,11 @@ def build_parser() -> argparse.ArgumentParser:
     fg.add_argument("--lz", type=float, default=2.0, help="Lz/h")
     fg.add_argument("--nx", type=int, default=48)
     fg.add_argument("--ny", type=int, default=64)
-    fg.add_argument("--nz", type=int, default=48)
+    fg.add_argument("--nz", type=int, default=64)
     fg.add_argument("--first-cell-yplus", type=float, default=0.8)
     fg.add_argument("--interval", type=float, default=4.0, help="snapshot interval in t+")
     fg.add_argument("--snapshots", type=int, default=80)
-    fg.add_argument("--spinup", type=float, default=400.0, help="discarded spin-up in t+")
+    fg.add_argument("--spinup", type=float, default=650.0, help="discarded spin-up in t+")
     fg.add_argument("--np", type=int, default=1, help="MPI ranks (decomposePar + mpirun -np N)")
     fg.add_argument("--initial", choices=("map", "perturb"), default="map")
     fg.add_argument("--y-max-plus", type=float, default=None)

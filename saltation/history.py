@@ -130,7 +130,7 @@ def basset_acceleration_prefactor(alpha, re_star):
 
 
 # ---------------------------------------------------------------- window weights
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _window_weights(n_int, oldest_central, dt, gamma):
     """Weights γ_j on slip samples w_j = u_r(t - jΔt), j = 0 … n_int (+1 if
     ``oldest_central``), such that Σ γ_j w_j = ∫₀^{n_int Δt} g(t-s) s^(-1/2) ds
@@ -172,7 +172,7 @@ def _window_weights(n_int, oldest_central, dt, gamma):
             gamma[m - 2] -= 0.5 * b_old
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _build_window_table(n_window, dt, table):
     # row k = number of stored samples since reset (k ≥ N_w + 2: full window)
     for k in range(n_window + 3):
@@ -182,7 +182,7 @@ def _build_window_table(n_window, dt, table):
             _window_weights(n_window, True, dt, table[k])
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _phi1(x):
     # (1 - e^{-x}(1 + x))/x², with its series where the formula cancels
     if x < 1.0e-2:
@@ -190,7 +190,7 @@ def _phi1(x):
     return (1.0 - math.exp(-x) * (1.0 + x)) / (x * x)
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _phi0(x):
     # (1 - e^{-x})/x
     if x < 1.0e-8:
@@ -255,7 +255,7 @@ def history_state_bytes(n_window=DEFAULT_WINDOW_STEPS, n_modes=N_MODES):
 
 
 # ---------------------------------------------------------------- per-particle kernels
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def history_reset(slip0, slip_hist, meta, tail):
     """Start a new history whose first sample is ``slip0`` (bed impact, release).
     Arguments are one particle's slices: slip_hist[i], meta[i], tail[i]."""
@@ -268,7 +268,7 @@ def history_reset(slip0, slip_hist, meta, tail):
             tail[k, c] = 0.0
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _integral3(slip_hist, meta, tail, window_weights, tail_weight):
     length = slip_hist.shape[0]
     count = meta[META_COUNT]
@@ -294,7 +294,7 @@ def _integral3(slip_hist, meta, tail, window_weights, tail_weight):
     return s0, s1, s2
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def history_integral(slip_hist, meta, tail, window_weights, tail_weight, out):
     """I(t_n) = ∫₀^{t_n} (du_r/dτ)(t_n - τ)^(-1/2) dτ for one particle, where t_n
     is the time of its newest sample: window dot product + Σ aᵢ Fᵢ."""
@@ -304,7 +304,7 @@ def history_integral(slip_hist, meta, tail, window_weights, tail_weight, out):
     out[2] = s2
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _advance(slip_hist, meta, tail, tail_decay, tail_c_old, tail_c_new):
     # open a new newest slot (returned): fold the interval leaving the window
     # into the tail modes first (O(m) work, no allocation)
@@ -346,7 +346,7 @@ def _advance(slip_hist, meta, tail, tail_decay, tail_c_old, tail_c_new):
     return head
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def history_push(slip_new, slip_hist, meta, tail, tail_decay, tail_c_old, tail_c_new):
     """Append the slip u_r(t_{n+1}) (one particle's slices).  Used when the
     history is recorded without the implicit step end (tests, diagnostics);
@@ -356,14 +356,14 @@ def history_push(slip_new, slip_hist, meta, tail, tail_decay, tail_c_old, tail_c
         slip_hist[head, c] = slip_new[c]
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def add_basset_acceleration(prefactor, i_start, out):
     """out += a_bs = -P I_n: the history term held over the RK4 stages."""
     for c in range(3):
         out[c] -= prefactor * i_start[c]
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def history_end_step(u, uf_new, i_start, prefactor, dt, slip_hist, meta, tail,
                      window_weights, tail_weight, tail_decay, tail_c_old, tail_c_new,
                      i_next):
@@ -400,7 +400,7 @@ def history_end_step(u, uf_new, i_start, prefactor, dt, slip_hist, meta, tail,
 
 
 # ---------------------------------------------------------------- reference (tests)
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _full_history(w, dt, gamma, out):
     n = w.shape[0] - 1
     _window_weights(n, False, dt, gamma)

@@ -123,12 +123,10 @@ def make_state(pos, vel, spin, t0, n_window, jump_capacity=16) -> GrainState:
 # the per-stage helper is inlined into it. step_particle itself is a call, not inlined
 # into advance's prange body: Numba 0.68 drops writes made by parfor-inlined code through
 # a named tuple's arrays (st.status[p] = ...).
-# Two Numba facts follow. (1) A kernel first compiled from here (forces, spin, history,
-# bed, rng) is compiled without reference counting too, but one already compiled or
-# cached from an ordinary caller (a test calling it from Python) keeps its counting:
-# the step then costs ~0.45 us more per grain (benchmarks/bench_saltation.py,
-# "forces_and_spin"). Marking those kernels _nrt=False in their own modules would make
-# the fast case the only one. (2) Nothing called from the step may allocate (np.empty,
+# Two Numba facts follow. (1) The kernels the step calls (forces, spin, history, bed,
+# rng) are marked _nrt=False in their own modules, so they are refcount-free whichever
+# caller compiles them first (a test calling one from Python used to leave a counting
+# version in the cache: ~0.45 us more per grain, benchmarks/bench_saltation.py). (2) Nothing called from the step may allocate (np.empty,
 # np.zeros, array-returning functions): compiled from here it fails to type. Allocate in
 # make_state / make_workspace.
 
