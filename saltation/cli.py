@@ -99,7 +99,7 @@ def _flow_generate(args) -> int:
 
 
 def _run(args) -> int:
-    from .run import run
+    from .run import RunInterrupted, run
 
     over = {}
     for item in args.set or []:
@@ -108,7 +108,16 @@ def _run(args) -> int:
         k, v = item.split("=", 1)
         over[k.strip()] = v.strip()
 
-    res = run(args.case, out=args.out, progress=not args.quiet, **_typed(over))
+    try:
+        res = run(args.case, out=args.out, progress=not args.quiet, resume=args.resume, **_typed(over))
+    except RunInterrupted as stop:
+        s = stop.result.summary
+        print(f"saltation: interrupted (signal {stop.signum}) at step {s['steps']}; outputs flushed, "
+              f"checkpoint and summary.json in {stop.result.directory}", file=sys.stderr)
+        print(f"saltation: continue with: saltation run {shlex.quote(args.case)} --resume --out "
+              f"{shlex.quote(str(stop.result.directory))}" + "".join(f" --set {shlex.quote(x)}" for x in args.set or []),
+              file=sys.stderr)
+        return 128 + stop.signum
     s = res.summary
     j = s["jumps"]
     print(f"run directory  {res.directory}")
@@ -162,6 +171,8 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--out", default=None, help="run directory (default: output.directory or runs/NAME)")
     r.add_argument("--set", action="append", metavar="TABLE.KEY=VALUE", help="override a case-file key (repeatable)")
     r.add_argument("--quiet", action="store_true", help="no progress bar")
+    r.add_argument("--resume", action="store_true",
+                   help="continue from the run directory's checkpoint (written periodically and on SIGINT/SIGTERM)")
     r.set_defaults(func=_run)
 
     v = sub.add_parser("validate", help="single-grain validation cases and their comparison table/figure")

@@ -48,6 +48,9 @@ Choices made here (the SPEC leaves them open)
   stiffness below it is an error. The contact (duration π√(m_eff/k)) is resolved in 20
   sub-steps; ``Case.contact_substeps`` says how many per hydrodynamic step.
 * Output intervals absent: tracks every 0.5 d/u*, VTK 100 frames per run.
+* Checkpoints (``output.checkpoint_every`` s of wall time, ``output.checkpoint_steps``
+  steps) are taken at the run loop's chunk ends only, so a resumed run is bit for bit
+  the uninterrupted one; neither key changes the physics.
 """
 
 from __future__ import annotations
@@ -444,6 +447,12 @@ class OutputConfig(_Table):
     vtk: bool = _key(True, kind="bool", doc="write ParaView particles.pvd + VTU pieces")
     vtk_interval: float | None = _key(kind="float", unit="s", gt=0.0,
                                       doc="ParaView frame interval (s); absent: duration/100")
+    checkpoint_every: float = _key(600.0, kind="float", unit="s", ge=0.0,
+                                   doc="wall-clock seconds between checkpoints (run.py; "
+                                       "0: none by time); SIGINT/SIGTERM always write one")
+    checkpoint_steps: int = _key(0, kind="int", ge=0,
+                                 doc="also checkpoint every this many time steps (0: none "
+                                     "by steps)")
 
 
 TABLES: dict[str, type[_Table]] = {

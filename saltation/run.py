@@ -6,8 +6,12 @@ the kernels (integrator.py and the sub-model modules it calls).
 """
 from __future__ import annotations
 
+import json
 import math
+import os
 import shutil
+import signal
+import threading
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -29,6 +33,38 @@ DISCARDED_JUMPS = 10  # each grain's first jumps carry initial-condition memory 
 
 class SimulationError(RuntimeError):
     """A run stopped: the message names the particle, the step and its state."""
+
+
+class RunInterrupted(KeyboardInterrupt):
+    """SIGINT/SIGTERM stopped a run at the end of a chunk: a checkpoint was written, the
+    outputs flushed and summary.json says status "interrupted". ``result`` is the
+    RunResult so far, ``signum`` the signal; ``run(..., resume=True)`` continues."""
+
+    def __init__(self, result: "RunResult", signum: int):
+        super().__init__(f"run interrupted by signal {signum} at step {result.summary['steps']}; "
+                         f"checkpoint in {result.directory / CHECKPOINT}")
+        self.result = result
+        self.signum = signum
+
+
+# Checkpoints (SPEC §9 --resume). A checkpoint is taken only where the loop returns from
+# the kernel anyway (chunk ends: output times, every CHUNK_STEPS steps, full jump
+# buffers). Those points depend on the state alone, never on wall time or on when a
+# signal came, so a resumed run calls the kernel with the same (t0, n_steps) chunks and
+# collects jumps in the same order as an uninterrupted one: bit for bit the same run.
+CHECKPOINT = "checkpoint.npz"
+PARTS = ".parts"  # checkpointable Parquet parts, merged into jumps/tracks.parquet at the end
+CHUNK_STEPS = 200  # longest stretch between two chunk ends (how soon a signal is honoured)
+# the fluid seen at each grain is carried from one step to the next (integrator.Workspace)
+FLUID_FIELDS = ("uf", "grad", "dudt", "vort", "uf_top", "uf_bot")
+_NOT_THE_RUN = {("output", "checkpoint_every"), ("output", "checkpoint_steps"), ("output", "directory"),
+                ("run", "threads")}
+
+
+def _case_keys(case: Case) -> dict:
+    """Flat {"table.key": value} of a case, less the keys a resumed run may change."""
+    return {f"{t}.{k}": v for t, keys in case.to_dict().items() for k, v in keys.items()
+            if (t, k) not in _NOT_THE_RUN}
 
 
 @dataclass
@@ -66,26 +102,33 @@ def _les_box_m(ds, case: Case):
     return (lx * visc_len, lz * visc_len, ds.re_tau * visc_len)
 
 
-def run(case, out=None, progress=True, **overrides) -> RunResult:
+def run(case, out=None, progress=True, resume=False, **overrides) -> RunResult:
     """Run one case (a path or a dict of tables); overrides use "table.key" names.
 
     Writes config.toml, summary.json, jumps.parquet, tracks.parquet, particles.pvd and
-    returns a RunResult (.summary, .jumps, .tracks)."""
+    returns a RunResult (.summary, .jumps, .tracks). ``resume=True`` continues from the
+    run directory's checkpoint (same case; the result is that of an uninterrupted run).
+    SIGINT/SIGTERM write a checkpoint and raise :class:`RunInterrupted`."""
     case = load_case(case, overrides or None) if not isinstance(case, Case) else case
     ds = open_flow(case)
     case = resolve_domain(case, _les_box_m(ds, case) if case.flow.source == "les" else None)
     out = Path(out or case.output.directory or Path("runs") / (case.run.name or "run"))
-    return Simulation(case, ds, out, progress=progress).run()
+    return Simulation(case, ds, out, progress=progress, resume=resume).run()
 
 
 class Simulation:
     """Holds the state of one run; ``run()`` drives it to the end."""
 
-    def __init__(self, case: Case, flow, out: Path, progress=True):
+    def __init__(self, case: Case, flow, out: Path, progress=True, resume=False, stop_after_steps=None):
+        """resume: continue from out/checkpoint.npz. stop_after_steps: a test hook that
+        acts as a SIGINT arriving once that many steps are done."""
         self.case = case
         self.flow = flow
         self.out = Path(out)
         self.progress = progress
+        self.resume = resume
+        self.stop_after_steps = stop_after_steps
+        self._signal = None
         self.n = int(case.n_particles)
         d = case.particle.diameter
         lx, lz, _ = case.domain
@@ -164,32 +207,40 @@ class Simulation:
 
         c = self.case
         self.out.mkdir(parents=True, exist_ok=True)
-        (self.out / "config.toml").write_text(dump_toml(c))
+        ckpt = self._read_checkpoint() if self.resume else None
+        if ckpt is None:
+            (self.out / "config.toml").write_text(dump_toml(c))
+            for stale in (self.out / CHECKPOINT, self.out / PARTS):
+                if stale.is_dir():
+                    shutil.rmtree(stale)
+                elif stale.exists():
+                    stale.unlink()
         numba.set_num_threads(self.threads())
         threads = numba.get_num_threads()
-        st = self._initial_state()
-        ws = make_workspace(self.n)
+        meta = ckpt[0] if ckpt else {}
+        if ckpt:
+            st, ws, rows = ckpt[1], ckpt[2], ckpt[3]
+        else:
+            st, ws, rows = self._initial_state(), make_workspace(self.n), []
         f = self.flow.arrays
         d, ts = c.particle.diameter, c.time_scale
-        jw = JumpWriter(self.out / "jumps.parquet")
-        tw = TrackWriter(self.out / "tracks.parquet") if c.output.tracks else None
+        parts = self.out / PARTS
+        jw = JumpWriter(self.out / "jumps.parquet", parts=parts, first_part=meta.get("jump_parts", 0))
+        tw = TrackWriter(self.out / "tracks.parquet", parts=parts, first_part=meta.get("track_parts", 0)) if c.output.tracks else None
         vw = None
         if c.output.vtk:
-            if (self.out / "vtk").exists():
-                shutil.rmtree(self.out / "vtk")
-            vw = ParaViewWriter(self.out, d)
+            vw = ParaViewWriter(self.out, d, frames=meta.get("vtk_frames"))
         track_every = c.tracks_every
         vtk_every = c.vtk_every
-        every = [e for e, w in ((track_every, tw), (vtk_every, vw)) if w is not None]
-        rows: list = []
-        wall0 = time.perf_counter()
+        every = [e for e, w in ((track_every, tw), (vtk_every, vw)) if w is not None] + [CHUNK_STEPS]
+        wall0 = time.perf_counter() - meta.get("wall_s", 0.0)
         t_compile = time.perf_counter()
         advance(f, self.coef, self.bed, c.run.seed, st, ws, self.hist_coef, 0.0, self.dt, 0, self.top_d)
-        compile_s = time.perf_counter() - t_compile
-        kernel_s = 0.0
+        compile_s = time.perf_counter() - t_compile + meta.get("compile_s", 0.0)
+        kernel_s = meta.get("kernel_s", 0.0)
         status = "completed"
-        step = 0
-        bar = tqdm(total=self.n_steps, desc=c.run.name or "run", unit="step", disable=not self.progress, delay=2.0)
+        step = meta.get("step", 0)
+        bar = tqdm(total=self.n_steps, initial=step, desc=c.run.name or "run", unit="step", disable=not self.progress, delay=2.0)
         particle_idx = np.arange(self.n)
 
         def output(step_now):
@@ -199,8 +250,16 @@ class Simulation:
             if vw is not None and step_now % vtk_every == 0:
                 vw.write(t * ts, st.pos * d, st.vel * (d / ts), st.spin / ts)
 
+        def checkpoint():
+            times = {"wall_s": time.perf_counter() - wall0, "compile_s": compile_s, "kernel_s": kernel_s}
+            self._write_checkpoint(st, ws, rows, step, jw, tw, vw, times)
+
+        last_ckpt_wall, last_ckpt_step = time.perf_counter(), step
+        every_s, every_steps = c.output.checkpoint_every, c.output.checkpoint_steps
+        old_handlers = self._catch_signals()
         try:
-            output(0)
+            if ckpt is None:
+                output(0)
             while step < self.n_steps:
                 nxt = min([self.n_steps] + [(step // e + 1) * e for e in every])
                 t0 = time.perf_counter()
@@ -215,10 +274,24 @@ class Simulation:
                 bar.update(done)
                 if step == nxt:
                     output(step)
+                # a chunk end: the only place a checkpoint is taken (see CHECKPOINT)
+                if self.stop_after_steps is not None and step >= self.stop_after_steps and self._signal is None:
+                    self._signal = signal.SIGINT
+                if self._signal is not None and step < self.n_steps:
+                    status = "interrupted"
+                    checkpoint()
+                    break
+                if step < self.n_steps and (
+                    (every_s > 0 and time.perf_counter() - last_ckpt_wall >= every_s)
+                    or (every_steps > 0 and step // every_steps > last_ckpt_step // every_steps)
+                ):
+                    checkpoint()
+                    last_ckpt_wall, last_ckpt_step = time.perf_counter(), step
         except KeyboardInterrupt:
             status = "interrupted"
             raise
         finally:
+            self._restore_signals(old_handlers)
             bar.close()
             jw.close()
             if tw is not None:
@@ -227,8 +300,95 @@ class Simulation:
                 vw.close()
             wall = time.perf_counter() - wall0
             summary = self._summary(st, rows, step, wall, compile_s, kernel_s, threads, status)
+            if ckpt is not None:
+                summary["resumed_from_step"] = meta["step"]
+            if status == "completed":
+                (self.out / CHECKPOINT).unlink(missing_ok=True)
+                shutil.rmtree(self.out / PARTS, ignore_errors=True)
+            elif status == "interrupted" and (self.out / CHECKPOINT).exists():
+                summary["checkpoint"] = {"file": CHECKPOINT, "step": self._checkpoint_step}
             write_json(self.out / "summary.json", summary)
-        return RunResult(self.out, summary)
+        result = RunResult(self.out, summary)
+        if status == "interrupted":
+            raise RunInterrupted(result, int(self._signal))
+        return result
+
+    # ------------------------------------------------------------------ checkpoints
+    _checkpoint_step = None
+
+    def _catch_signals(self):
+        """SIGINT/SIGTERM → stop at the next chunk end with a checkpoint; a second signal
+        stops at once (KeyboardInterrupt). Signals can be caught in the main thread only
+        (a Dask worker's runs are stopped by the sweep, which skips finished cases)."""
+        if threading.current_thread() is not threading.main_thread():
+            return None
+
+        def handler(signum, frame):
+            if self._signal is not None:
+                raise KeyboardInterrupt
+            self._signal = signum
+
+        return {s: signal.signal(s, handler) for s in (signal.SIGINT, signal.SIGTERM)}
+
+    @staticmethod
+    def _restore_signals(old):
+        for s, h in (old or {}).items():
+            signal.signal(s, h)
+
+    def _write_checkpoint(self, st, ws, rows, step, jw, tw, vw, times):
+        """Everything the loop needs to go on bit for bit, written atomically (tmp + rename)
+        after the Parquet parts it counts are closed."""
+        arrays = {f"state.{k}": v for k, v in st._asdict().items()}
+        arrays.update({f"fluid.{k}": getattr(ws, k) for k in FLUID_FIELDS})
+        arrays["jump_rows"] = np.concatenate(rows) if rows else np.zeros((0, 5))
+        meta = {
+            "format": 1,
+            "step": int(step),
+            "n_particles": self.n,
+            "case": _case_keys(self.case),
+            "jump_parts": jw.checkpoint(),
+            "track_parts": tw.checkpoint() if tw is not None else 0,
+            "vtk_frames": list(vw.frames) if vw is not None else [],
+            **times,
+        }
+        arrays["meta"] = np.frombuffer(json.dumps(meta, default=str).encode(), dtype=np.uint8)
+        tmp = self.out / (CHECKPOINT + ".tmp")
+        with open(tmp, "wb") as fh:
+            np.savez(fh, **arrays)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, self.out / CHECKPOINT)
+        self._checkpoint_step = int(step)
+
+    def _read_checkpoint(self):
+        """(meta, GrainState, Workspace, jump rows) from out/checkpoint.npz; the case must be
+        the one that wrote it (output.checkpoint_*, output.directory, run.threads may differ)."""
+        from .integrator import GrainState
+
+        path = self.out / CHECKPOINT
+        if not path.exists():
+            done = self.out / "summary.json"
+            why = ""
+            if done.exists():
+                why = f' (summary.json says status "{json.loads(done.read_text()).get("status")}")'
+            raise SimulationError(f"cannot resume: no checkpoint {path}{why}; run without --resume to start afresh")
+        with np.load(path) as z:
+            data = {k: z[k] for k in z.files}
+        meta = json.loads(bytes(data.pop("meta")).decode())
+        now = _case_keys(self.case)
+        changed = sorted(k for k in set(now) | set(meta["case"])
+                         if json.dumps(now.get(k), default=str) != json.dumps(meta["case"].get(k), default=str))
+        if changed:
+            raise SimulationError(
+                f"cannot resume from {path}: the case differs from the one that wrote it in "
+                + ", ".join(f"{k} (checkpoint {meta['case'].get(k)!r}, now {now.get(k)!r})" for k in changed)
+                + "; only output.checkpoint_every, output.checkpoint_steps, output.directory and run.threads may change")
+        st = GrainState(*[np.ascontiguousarray(data[f"state.{k}"]) for k in GrainState._fields])
+        ws = make_workspace(self.n)
+        for k in FLUID_FIELDS:
+            getattr(ws, k)[...] = data[f"fluid.{k}"]
+        rows = [data["jump_rows"]] if len(data["jump_rows"]) else []
+        return meta, st, ws, rows
 
     # ------------------------------------------------------------------ summary
     def _summary(self, st, rows, steps, wall, compile_s, kernel_s, threads, status):

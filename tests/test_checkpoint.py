@@ -1,0 +1,158 @@
+"""Checkpoint and restart (issue 4 item 6): an interrupted and resumed run is the
+uninterrupted run, bit for bit — jumps.parquet, tracks.parquet, the jump statistics and
+the ParaView frames — whether it was stopped by a signal (SIGINT to the CLI), by the
+in-process test hook, or killed after a periodic checkpoint."""
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from saltation.config import load_case
+from saltation.run import CHECKPOINT, PARTS, RunInterrupted, Simulation, SimulationError, open_flow, resolve_domain, run, _les_box_m
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def tiny_case(n=24, duration=0.8, **extra):
+    """Loglaw source, quartz d = 0.69 mm at τ*/τ*c = 1.79: 0.8 s = 29 d/u* = 1465 steps."""
+    case = {
+        "particle": {"diameter": 0.69e-3},
+        "flow": {"source": "loglaw", "tau_ratio": 1.79},
+        "run": {"n_particles": n, "duration": duration, "dt_particle": 0.02, "seed": 3, "threads": 1, "name": "tiny"},
+        "output": {"tracks": True, "vtk": True, "vtk_interval": 0.1},
+    }
+    for key, value in extra.items():
+        table, name = key.split(".")
+        case.setdefault(table, {})[name] = value
+    return case
+
+
+def simulation(case, out, **kw):
+    c = load_case(case)
+    ds = open_flow(c)
+    c = resolve_domain(c, _les_box_m(ds, c) if c.flow.source == "les" else None)
+    return Simulation(c, ds, Path(out), progress=False, **kw)
+
+
+def assert_same_run(a: Path, b: Path):
+    sa = json.loads((a / "summary.json").read_text())
+    sb = json.loads((b / "summary.json").read_text())
+    assert sa["status"] == sb["status"] == "completed"
+    assert sa["steps"] == sb["steps"]
+    assert sa["jumps"] == sb["jumps"]  # exact: same jumps collected in the same order
+    assert sa["collisions"] == sb["collisions"]
+    assert sa["steps_above_flow_top"] == sb["steps_above_flow_top"]
+    for name in ("jumps.parquet", "tracks.parquet"):
+        fa, fb = pd.read_parquet(a / name), pd.read_parquet(b / name)
+        assert len(fa) > 0
+        pd.testing.assert_frame_equal(fa, fb, check_exact=True)
+    assert (a / "particles.pvd").read_text() == (b / "particles.pvd").read_text()
+    pieces = sorted(p.name for p in (a / "vtk").iterdir())
+    assert pieces == sorted(p.name for p in (b / "vtk").iterdir())
+    assert not (b / CHECKPOINT).exists() and not (b / PARTS).exists()
+
+
+def test_interrupted_and_resumed_run_is_the_uninterrupted_run(tmp_path):
+    case = tiny_case()
+    ref = run(case, out=tmp_path / "ref", progress=False)
+    assert ref.summary["jumps"]["recorded"] > 0
+
+    with pytest.raises(RunInterrupted) as stop:
+        simulation(case, tmp_path / "b", stop_after_steps=610).run()
+    s = stop.value.result.summary
+    assert s["status"] == "interrupted"
+    assert 610 <= s["steps"] < ref.summary["steps"]
+    assert s["checkpoint"]["step"] == s["steps"]
+    assert json.loads((tmp_path / "b" / "summary.json").read_text())["status"] == "interrupted"
+    # outputs flushed: the partial tables are readable and hold the start of the full ones
+    part = pd.read_parquet(tmp_path / "b" / "tracks.parquet")
+    full = ref.tracks
+    pd.testing.assert_frame_equal(part, full.iloc[: len(part)].reset_index(drop=True), check_exact=True)
+    assert len(part) < len(full)
+
+    res = run(case, out=tmp_path / "b", progress=False, resume=True)
+    assert res.summary["resumed_from_step"] == s["steps"]
+    assert_same_run(tmp_path / "ref", tmp_path / "b")
+    # the run does depend on its state: a different seed is a different run
+    other = run(case, out=tmp_path / "c", progress=False, **{"run.seed": 4})
+    assert other.summary["jumps"] != ref.summary["jumps"]
+
+
+def test_resume_after_kill_discards_output_written_after_the_checkpoint(tmp_path):
+    """A kill -9 leaves the last periodic checkpoint plus parts written after it (one of
+    them unfinished): resuming drops those and still gives the uninterrupted run."""
+    case = tiny_case(**{"output.checkpoint_steps": 300})
+    run(case, out=tmp_path / "ref", progress=False)
+
+    sim = simulation(case, tmp_path / "k", stop_after_steps=1000)
+    with pytest.raises(RunInterrupted):
+        sim.run()
+    out = tmp_path / "k"
+    # roll the checkpoint back to an earlier periodic one, as a kill would have left it:
+    # take a fresh run that checkpoints at 300 steps and stops at once after that
+    with pytest.raises(RunInterrupted):
+        simulation(case, tmp_path / "early", stop_after_steps=300).run()
+    for stale in (out / CHECKPOINT,):
+        stale.unlink()
+    (tmp_path / "early" / CHECKPOINT).replace(out / CHECKPOINT)
+    early_parts = {p.name for p in (tmp_path / "early" / PARTS).iterdir()}
+    later = [p for p in (out / PARTS).iterdir() if p.name not in early_parts]
+    assert later, "the longer run should have written parts after the 300-step checkpoint"
+    (out / PARTS / "jumps-00099.parquet").write_bytes(b"PAR1 half-written")
+    (out / "vtk" / "particles_00999.vtu").write_text("stale frame")
+    res = run(case, out=out, progress=False, resume=True)
+    assert res.summary["resumed_from_step"] == 300
+    assert_same_run(tmp_path / "ref", out)
+
+
+def test_resume_refuses_another_case_and_a_missing_checkpoint(tmp_path):
+    case = tiny_case(duration=0.3)
+    with pytest.raises(RunInterrupted):
+        simulation(case, tmp_path / "a", stop_after_steps=200).run()
+    with pytest.raises(SimulationError, match=r"run\.seed \(checkpoint 3, now 5\)"):
+        run(case, out=tmp_path / "a", progress=False, resume=True, **{"run.seed": 5})
+    # threads and checkpoint settings may change
+    run(case, out=tmp_path / "a", progress=False, resume=True, **{"run.threads": 2, "output.checkpoint_every": 5.0})
+    with pytest.raises(SimulationError, match="no checkpoint.*completed"):
+        run(case, out=tmp_path / "a", progress=False, resume=True)
+
+
+def test_sigint_to_the_cli_checkpoints_and_resume_completes(tmp_path):
+    case_dict = tiny_case(n=150, duration=3.0, **{"output.checkpoint_steps": 200, "output.vtk": False})
+    case_file = tmp_path / "case.toml"
+    lines = []
+    for table, keys in case_dict.items():
+        lines.append(f"[{table}]")
+        lines += [f"{k} = {json.dumps(v)}" for k, v in keys.items()]
+    case_file.write_text("\n".join(lines) + "\n")
+    out = tmp_path / "sig"
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    cmd = [sys.executable, "-m", "saltation.cli", "run", str(case_file), "--out", str(out), "--quiet"]
+    proc = subprocess.Popen(cmd, cwd=tmp_path, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.time() + 120
+    while not (out / CHECKPOINT).exists() and proc.poll() is None and time.time() < deadline:
+        time.sleep(0.005)
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 128 + signal.SIGINT, err
+    assert "--resume" in err
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["status"] == "interrupted" and summary["steps"] < 5000
+
+    done = subprocess.run(cmd + ["--resume"], cwd=tmp_path, env=env, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    run(case_file, out=tmp_path / "ref", progress=False)
+    sa = json.loads((tmp_path / "ref" / "summary.json").read_text())
+    sb = json.loads((out / "summary.json").read_text())
+    assert sa["jumps"] == sb["jumps"] and sb["status"] == "completed"
+    for name in ("jumps.parquet", "tracks.parquet"):
+        pd.testing.assert_frame_equal(pd.read_parquet(tmp_path / "ref" / name), pd.read_parquet(out / name), check_exact=True)
