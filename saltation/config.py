@@ -96,6 +96,7 @@ RESPONSE_SLIP = 10.0  # u*: slip at which the drag correction of τ_p is taken
 CONTACT_STEPS = 20  # a soft contact is resolved in ≥ 20 (sub-)steps, SPEC §5
 TRACKS_INTERVAL_PARTICLE = 0.5  # d/u*, default track sampling
 VTK_FRAMES = 100  # default number of ParaView frames per run
+VARIANCE_INTERVAL_PARTICLE = 0.1  # d/u*, default sampling of the diffusion variances
 
 # Paper Table 2: restitution e and Coulomb friction f of the bed rebound (SPEC §4).
 # Niño & García (1994): e = 0.75 − 0.25 τ*/τ*c.
@@ -447,6 +448,14 @@ class OutputConfig(_Table):
     vtk: bool = _key(True, kind="bool", doc="write ParaView particles.pvd + VTU pieces")
     vtk_interval: float | None = _key(kind="float", unit="s", gt=0.0,
                                       doc="ParaView frame interval (s); absent: duration/100")
+    variance: bool = _key(True, kind="bool",
+                          doc="accumulate the displacement variances of the diffusion analysis "
+                              "during the run (variance.parquet, SPEC §6; needs >= 2 grains)")
+    variance_interval: float | None = _key(kind="float", unit="s", gt=0.0,
+                                           doc="sampling interval of the displacement variances "
+                                               "(s); absent: 0.1 d/u*")
+    variance_origins: int = _key(8, kind="int", ge=1,
+                                 doc="time origins the displacement variances are averaged over")
     checkpoint_every: float = _key(600.0, kind="float", unit="s", ge=0.0,
                                    doc="wall-clock seconds between checkpoints (run.py; "
                                        "0: none by time); SIGINT/SIGTERM always write one")
@@ -660,6 +669,13 @@ class Case:
         return self.tracks_every * self.dt
 
     @property
+    def variance_every(self) -> int:
+        """Steps between samples of the diffusion variances (output.variance_interval, or 0.1 d/u*)."""
+        given = self.output.variance_interval
+        return self._steps_per(given if given is not None
+                               else VARIANCE_INTERVAL_PARTICLE * self.time_scale)
+
+    @property
     def vtk_every(self) -> int:
         """Steps between ParaView frames (output.vtk_interval, or duration/100)."""
         given = self.output.vtk_interval
@@ -784,7 +800,7 @@ class Case:
         if self.dt > self.duration:
             raise CaseError(f"run.duration = {self.duration!r} s is shorter than one time step "
                             f"dt = {self.dt:.4g} s: must be >= dt", "run", "duration")
-        for key in ("tracks_interval", "vtk_interval"):
+        for key in ("tracks_interval", "vtk_interval", "variance_interval"):
             value = getattr(self.output, key)
             if value is not None and value < self.dt * (1 - 1e-9):
                 raise CaseError(f"output.{key} = {value!r} s is out of range: must be >= the "
@@ -852,6 +868,7 @@ class Case:
             "contact_substeps": self.contact_substeps,
             "tracks_every": self.tracks_every,
             "vtk_every": self.vtk_every,
+            "variance_every": self.variance_every,
         }
         domain, n, conc = self._domain_solution()
         out.update(domain_m=list(domain) if domain else None, n_particles=n,
@@ -1094,6 +1111,8 @@ def _resolved_comment(case: Case, table: str, key: str) -> str | None:
         return f"{case.collision_stiffness:.6g} N/m"
     if table == "output" and key in ("tracks_interval", "vtk_interval"):
         return f"{getattr(case, key):.6g} s"
+    if table == "output" and key == "variance_interval":
+        return f"{case.variance_every * case.dt:.6g} s"
     return None
 
 

@@ -28,6 +28,8 @@ from .initial import initial_conditions
 from .integrator import NOT_FINITE, advance, make_state, make_workspace
 from .writers import JumpWriter, ParaViewWriter, TrackWriter, write_json
 
+VARIANCE_FILE = "variance.parquet"  # displacement variances for the diffusion exponents
+
 DISCARDED_JUMPS = 10  # each grain's first jumps carry initial-condition memory (paper §3.2)
 
 
@@ -233,6 +235,7 @@ class Simulation:
         track_every = c.tracks_every
         vtk_every = c.vtk_every
         every = [e for e, w in ((track_every, tw), (vtk_every, vw)) if w is not None] + [CHUNK_STEPS]
+        var = self._variance(resume_step=meta["step"] if ckpt else None)  # diffusion statistics (SPEC §6)
         wall0 = time.perf_counter() - meta.get("wall_s", 0.0)
         t_compile = time.perf_counter()
         advance(f, self.coef, self.bed, c.run.seed, st, ws, self.hist_coef, 0.0, self.dt, 0, self.top_d)
@@ -249,10 +252,14 @@ class Simulation:
                 tw.write(t, particle_idx, st.pos, st.vel, st.spin)
             if vw is not None and step_now % vtk_every == 0:
                 vw.write(t * ts, st.pos * d, st.vel * (d / ts), st.spin / ts)
+            if var is not None:
+                var.sample_step(step_now, st.pos)
 
         def checkpoint():
             times = {"wall_s": time.perf_counter() - wall0, "compile_s": compile_s, "kernel_s": kernel_s}
             self._write_checkpoint(st, ws, rows, step, jw, tw, vw, times)
+            if var is not None:
+                var.save(self.out / var.STATE_FILE, step)
 
         last_ckpt_wall, last_ckpt_step = time.perf_counter(), step
         every_s, every_steps = c.output.checkpoint_every, c.output.checkpoint_steps
@@ -261,7 +268,8 @@ class Simulation:
             if ckpt is None:
                 output(0)
             while step < self.n_steps:
-                nxt = min([self.n_steps] + [(step // e + 1) * e for e in every])
+                nxt = min([self.n_steps] + [(step // e + 1) * e for e in every]
+                          + [s for s in [var.next_step(step) if var is not None else None] if s is not None])
                 t0 = time.perf_counter()
                 want = nxt - step
                 done = advance(f, self.coef, self.bed, c.run.seed, st, ws, self.hist_coef, step * self.dt, self.dt, want, self.top_d)
@@ -300,6 +308,11 @@ class Simulation:
                 vw.close()
             wall = time.perf_counter() - wall0
             summary = self._summary(st, rows, step, wall, compile_s, kernel_s, threads, status)
+            if var is not None:
+                var.write(self.out / VARIANCE_FILE)
+                summary["variance"] = var.summary()
+                if status == "completed":
+                    (self.out / var.STATE_FILE).unlink(missing_ok=True)
             if ckpt is not None:
                 summary["resumed_from_step"] = meta["step"]
             if status == "completed":
@@ -312,6 +325,25 @@ class Simulation:
         if status == "interrupted":
             raise RunInterrupted(result, int(self._signal))
         return result
+
+    def _variance(self, resume_step=None):
+        """The displacement-variance accumulator (analysis/variance.py), or None when
+        output.variance is off or there are fewer than 2 grains. On resume its sums come
+        from the state saved with the checkpoint; without them it is off (a partial sum
+        would be wrong) and the old variance.parquet is removed."""
+        from .analysis.variance import AnalysisError, RunVariance
+
+        c = self.case
+        try:
+            if not c.output.variance or self.n < 2:
+                raise AnalysisError("off")
+            var = RunVariance(self.n, self.n_steps, c.variance_every, self.dt, c.output.variance_origins)
+            if resume_step is not None and not var.load(self.out / var.STATE_FILE, resume_step):
+                raise AnalysisError("no saved sums")
+        except AnalysisError:  # off, too few grains, or a run too short for any lag
+            (self.out / VARIANCE_FILE).unlink(missing_ok=True)
+            return None
+        return var
 
     # ------------------------------------------------------------------ checkpoints
     _checkpoint_step = None
