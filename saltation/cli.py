@@ -146,6 +146,19 @@ def _typed(over: dict) -> dict:
     return out
 
 
+def _sweep(args) -> int:
+    from .sweep import format_table, run_sweep
+
+    df = run_sweep(args.sweep, out=args.out, scheduler=args.scheduler, workers=args.workers,
+                   threads_per_worker=args.threads_per_worker)
+    print(format_table(df))
+    bad = df[df["status"] != "completed"]
+    if len(bad):
+        print(f"saltation: {len(bad)} case(s) not completed: {', '.join(bad['case'])}", file=sys.stderr)
+        return 1
+    return 0
+
+
 def _validate(args) -> int:
     from .validate import run_validation
 
@@ -174,6 +187,16 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--resume", action="store_true",
                    help="continue from the run directory's checkpoint (written periodically and on SIGINT/SIGTERM)")
     r.set_defaults(func=_run)
+
+    sw = sub.add_parser("sweep", help="many cases (a [sweep] grid) on a local or remote Dask cluster; skips finished cases")
+    sw.add_argument("sweep", help="sweep file (TOML): a base case and a [sweep] table of lists")
+    sw.add_argument("--out", default=None, help="sweep folder (default: sweeps/<file stem>)")
+    sw.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                    help="an existing Dask scheduler, tcp://HOST:PORT (default: a LocalCluster on 127.0.0.1)")
+    sw.add_argument("--workers", type=int, default=None, help="cases at a time (default: cores / threads per worker)")
+    sw.add_argument("--threads-per-worker", type=int, default=None,
+                    help="Numba threads per case (default: cores / workers)")
+    sw.set_defaults(func=_sweep)
 
     v = sub.add_parser("validate", help="single-grain validation cases and their comparison table/figure")
     v.add_argument("which", choices=("nino-garcia",))
