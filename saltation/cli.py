@@ -159,6 +159,32 @@ def _sweep(args) -> int:
     return 0
 
 
+def _analyze(args) -> int:
+    from .analysis.report import analyze
+
+    res = analyze(args.directory, out=args.out, validation=args.validation)
+    if res["kind"] == "run":
+        d = res["diffusion"]
+        if d is not None and len(d.table):
+            print(f"diffusion ({d['source']}; T_J = " + (f"{d['jump_duration']:.3g}" if d["jump_duration"] else "?")
+                  + " d/u*)")
+            print(f"{'range':<13}{'dir':<4}{'t (d/u*)':>15} {'gamma':>6} {'95 % CI':>14} {'points':>6}")
+            for _, r in d.table.iterrows():
+                print(f"{r['range']:<13}{r['direction']:<4}{r['t_min']:>7.3g}-{r['t_max']:<7.3g} {r['gamma']:6.3f} "
+                      f"[{r['ci_low']:.3f}, {r['ci_high']:.3f}] {r['n_points']:6d}")
+        for k, v in res["problems"].items():
+            print(f"not fitted: {k}: {v}")
+    else:
+        gv = res["tables"]["gamma_vs_paper"]
+        print(f"{'table':<6}{'range':<13}{'dir':<4}{'tau':>5} {'C %':>6} {'ours':>6} {'paper':>6} {'diff':>6}")
+        for _, r in gv.iterrows():
+            f = lambda v: "   —  " if v is None or v != v else f"{v:6.2f}"  # noqa: E731
+            print(f"{r['table']:<6}{r['range']:<13}{r['direction']:<4}{r['tau_ratio']:5.2f} {r['concentration_pct']:6.3g} "
+                  f"{f(r['gamma_ours'])} {f(r['gamma_paper'])} {f(r['difference'])}  {r['note'][:70]}")
+    print(f"wrote {res['out']} (CSV tables, PNG figures) and the report {res['report']}")
+    return 0
+
+
 def _validate(args) -> int:
     from .validate import run_validation
 
@@ -197,6 +223,13 @@ def build_parser() -> argparse.ArgumentParser:
     sw.add_argument("--threads-per-worker", type=int, default=None,
                     help="Numba threads per case (default: cores / workers)")
     sw.set_defaults(func=_sweep)
+
+    a = sub.add_parser("analyze", help="jump statistics, diffusion exponents, collision statistics, figures, HTML report")
+    a.add_argument("directory", metavar="RUN_OR_SWEEP_DIR", help="a run directory or a sweep directory (cases/NAME/)")
+    a.add_argument("--out", default=None, help="output folder (default RUN_OR_SWEEP_DIR/analysis)")
+    a.add_argument("--validation", default=None,
+                   help="folder written by `saltation validate nino-garcia` (default: DIR/validation or DIR/../validation if present)")
+    a.set_defaults(func=_analyze)
 
     v = sub.add_parser("validate", help="single-grain validation cases and their comparison table/figure")
     v.add_argument("which", choices=("nino-garcia",))
@@ -256,12 +289,13 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     from flowfields.dataset import DatasetError
 
+    from .analysis.variance import AnalysisError
     from .config import CaseError
     from .run import SimulationError
 
     try:
         return int(args.func(args) or 0)
-    except (DatasetError, CaseError, SimulationError, FileNotFoundError) as exc:
+    except (DatasetError, CaseError, SimulationError, AnalysisError, FileNotFoundError) as exc:
         print(f"saltation: error: {exc}", file=sys.stderr)
         return 2
 

@@ -1,0 +1,106 @@
+"""``saltation analyze`` on small synthetic run and sweep directories (no simulation)."""
+from __future__ import annotations
+
+import json
+import re
+import sys
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+sys.path.insert(0, str(Path(__file__).parent))
+from test_diffusion import hopping_grains  # noqa: E402
+
+from saltation.analysis import reference as ref  # noqa: E402
+from saltation.analysis.report import analyze  # noqa: E402
+from saltation.cli import main  # noqa: E402
+
+
+def make_run(path: Path, n=30, n_samples=1500, concentration=0.0004, tau_ratio=1.79, seed=1):
+    """A run directory whose tracks are hopping grains (τ = 4 d/u*) and whose jumps
+    table lists those hops; summary.json in the run loop's layout."""
+    path.mkdir(parents=True)
+    tracks, tau = hopping_grains(n=n, n_samples=n_samples, seed=seed)
+    for c in ("u", "v", "w", "spin_x", "spin_y", "spin_z"):
+        tracks[c] = 0.0
+    tracks["u"] = tracks.groupby("particle")["x"].diff().fillna(0.0) / 0.08
+    tracks.to_parquet(path / "tracks.parquet")
+    rng = np.random.default_rng(seed)
+    m = 20 * n
+    dur = rng.uniform(0.8, 1.2, m) * tau
+    u = rng.normal(5, 1.5, m)
+    jumps = pd.DataFrame({"particle": np.repeat(np.arange(n), 20), "jump": np.tile(np.arange(20), n),
+                          "t_start": 0.0, "length": u * dur, "height": 2.0, "duration": dur, "velocity": u})
+    jumps.to_parquet(path / "jumps.parquet")
+    summary = {"status": "completed", "n_particles": n, "concentration": concentration, "tau_ratio": tau_ratio,
+               "tau_star": 0.032 * tau_ratio, "simulated_time_s": 3.0, "simulated_time_particle": n_samples * 0.08,
+               "jumps": {"count": 10 * n, "H_mean": 2.0, "H_std": 0.0, "L_mean": 20.0, "L_std": 6.0,
+                         "U_mean": 5.0, "U_std": 1.5},
+               "collisions": {"particle_particle": 3 * n, "bed": 20 * n, "per_particle": 20.0},
+               "timing": {"wall_s": 10.0 * n, "free_flight_s": 8.0 * n, "bed_s": 1.0, "particle_collisions_s": 1.0,
+                          "threads": 1, "compile_s": 0.1},
+               "particle_steps_per_s": 1e6}
+    (path / "summary.json").write_text(json.dumps(summary))
+    return path
+
+
+def test_analyze_run_directory(tmp_path):
+    run = make_run(tmp_path / "run")
+    res = analyze(run)
+    out = run / "analysis"
+    for f in ("jump_stats.csv", "diffusion.csv", "variance_curves.csv", "variance.png", "jump_distributions.png",
+              "collisions_cost.csv", "report.html"):
+        assert (out / f).exists(), f
+    d = res["diffusion"]
+    assert d["local"]["gamma_x"] == pytest.approx(1.0, abs=0.08)
+    js = pd.read_csv(out / "jump_stats.csv").set_index("quantity")
+    assert js.loc["T", "n"] == 10 * 30  # the first 10 of each grain's 20 jumps are dropped
+    page = (out / "report.html").read_text()
+    assert page.count("data:image/png;base64,") >= 3
+    assert not re.search(r'src="(?!data:)', page)  # self-contained: no external images
+
+
+def test_analyze_sweep_directory_side_by_side_with_paper(tmp_path):
+    sweep = tmp_path / "sweep"
+    make_run(sweep / "cases" / "a", concentration=0.0004, tau_ratio=1.79, seed=1)
+    make_run(sweep / "cases" / "b", n=40, concentration=0.0026, tau_ratio=1.79, seed=2)
+    # too short a record for the intermediate range: must show up as a note, never a NaN
+    make_run(sweep / "cases" / "c", concentration=0.0052, tau_ratio=2.43, n_samples=150, seed=3)
+    vdir = tmp_path / "validation"
+    vdir.mkdir()
+    pd.DataFrame({"tau_ratio": [1.79], "count": [100], "H_mean": [1.0]}).to_csv(vdir / "validation.csv", index=False)
+    res = analyze(sweep, validation=vdir)
+    out = sweep / "analysis"
+    for f in ("cases.csv", "gamma_vs_paper.csv", "cost_vs_paper.csv", "fig5_jumps_vs_concentration.png",
+              "fig6_velocity.png", "fig7_collisions_cost.png", "fig8_variance.png", "fig9_gamma.png", "report.html"):
+        assert (out / f).exists(), f
+    gv = res["tables"]["gamma_vs_paper"]
+    assert len(gv) == 3 * 4
+    row = gv[(gv["case"] == "b") & (gv["table"] == 5)].iloc[0]  # intermediate γx, τ 1.79, C 0.26 %
+    assert row["gamma_paper"] == ref.GAMMA[("intermediate", "x")][1.79][3] == 0.75
+    assert row["difference"] == pytest.approx(row["gamma_ours"] - 0.75)
+    short = gv[(gv["case"] == "c") & (gv["range"] == "intermediate")]
+    assert short["gamma_ours"].isna().all() and short["note"].str.contains("too short").all()
+    cv = res["tables"]["cost_vs_paper"]
+    assert cv["paper_N"].isna().all() and cv["note"].str.contains("no paper N").all()  # 30-40 grains
+    page = (out / "report.html").read_text()
+    assert "Table 7" in page and "validation" in page and page.count("data:image/png;base64,") >= 5
+
+
+def test_match_case():
+    assert ref.match_case(1.79, 0.26) == (1.79, 0.26, "")
+    assert ref.match_case(1.80, 0.30)[1] == 0.26
+    tau, c, why = ref.match_case(2.0, 0.26)
+    assert tau is None and "no paper case" in why
+    tau, c, why = ref.match_case(1.79, 0.7)
+    assert c is None and "nearest 0.52" in why
+
+
+def test_cli_errors(tmp_path, capsys):
+    assert main(["analyze", str(tmp_path / "missing")]) == 2
+    assert "not a directory" in capsys.readouterr().err
+    (tmp_path / "empty").mkdir()
+    assert main(["analyze", str(tmp_path / "empty")]) == 2
+    assert "nothing to analyse" in capsys.readouterr().err
