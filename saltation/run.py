@@ -427,6 +427,8 @@ class Simulation:
         c = self.case
         jumps = np.concatenate(rows) if rows else np.zeros((0, 5))
         counted = jumps[jumps[:, 1] >= DISCARDED_JUMPS] if len(jumps) else jumps
+        # by (particle, jump): the statistics do not depend on when jumps were collected
+        counted = counted[np.lexsort((counted[:, 1], counted[:, 0]))]
 
         def stat(col):
             if len(counted) == 0:
