@@ -1,0 +1,900 @@
+"""Rigid bonded-sphere grains in free flight and on the bed (seed 000 §2.4, SPEC §2, §4).
+
+Units. Particle units as everywhere (SPEC §1) with the length scale d = the case's
+particle diameter, here the *nominal* diameter Dn = (Dl Di Ds)^{1/3} of the grains:
+length Dn, velocity u*, time Dn/u*; in addition mass ρ Dn³ (ρ: fluid density), force
+ρ u*² Dn², torque ρ u*² Dn³. A component sphere k has diameter d_k (in Dn), volume weight
+w_k (its volume, scaled so that Σ w_k is the volume V of the union; = π d_k³/6 when the
+spheres do not overlap) and body-frame offset r_k from the centre of mass.
+
+State of a grain: centre of mass x, velocity v, orientation quaternion q (body → world,
+scalar first), angular velocity Ω (world frame; the body-frame ω_b = Rᵀ Ω).
+
+Forces, per component sphere at its own position x_k = x + R r_k, moving with
+u_k = v + Ω × (R r_k), fluid sampled there (``flowfields.sampler.sample_column``) —
+the sphere terms of SPEC §2 written as forces with the sphere's own diameter:
+
+=====================  ===========================================================
+drag                   F = −(π/8) d_k² C_D(Re_k) |u_r| u_r,  Re_k = |u_r| d_k Re*,
+                       Yen (1992) (``forces.drag_factor``)
+lift (y)               F_y = (π/8) C_L d_k² (|u_r|²(y_k + d_k/2) − |u_r|²(y_k − d_k/2))
+Magnus                 F = (π/8) C_Ω d_k³ (Ω − ½ω_f) × u_r
+added mass (fluid)     F = Cm w_k (∂u_f/∂t + (u_k·∇) u_f)
+fluid acceleration     F = w_k (∂u_f/∂t + (u_f·∇) u_f)
+Basset                 F = −(3/2)√π d_k²/√Re* · I_k,  I_k the history integral of
+                       the component's own slip (history.py, window + tail)
+rotational drag        T = −(d_k⁵/64) C_ω(Re_r) |ω_r| ω_r, ω_r = Ω − ½ω_f,
+                       Re_r = d_k² |ω_r| Re*/4 (``spin.py`` table)
+submerged weight       F = (V/τ*)(sin θ, −cos θ, 0) at the centre of mass
+=====================  ===========================================================
+
+summed into the force F and the torque T = Σ (R r_k) × F_k + Σ T_k: a sheared flow
+exerts a torque through the different drag on the components. For d_k = 1, r_k = 0
+every line divided by the virtual mass (1+R+Cm)π/6 is the sphere's per-mass term of
+forces.py / spin.py, so the one-sphere grain is the sphere integrator.
+
+Equations of motion. The added-mass reaction −Cm w_k du_k/dt of every component is
+moved to the left side with du_k/dt = a + α × r + Ω × (Ω × r): a constant 6×6
+generalized mass matrix in the body frame
+
+    M_b = [[(m + m_a) 1, −[S]×], [[S]×, I_b + I_a]],
+    m = (1+R) V,  m_a = Cm V,  S = Cm Σ w_k r_k,  I_a = Cm Σ w_k (|r_k|² 1 − r_k r_kᵀ),
+
+(I_b = (1+R) × the union's second moment, shapes.py) with the right side
+[F_b − ω_b × (ω_b × S); T_b − ω_b × ((I_b + I_a) ω_b)] (Euler's equations with the
+gyroscopic and centripetal terms; the inertia need not be diagonal). S = 0 unless
+the spheres overlap. dq/dt = ½ (0, Ω) ⊗ q, dΩ/dt = R α_b, dv/dt = R a_b. Classic RK4
+on (x, v, q, Ω), q renormalized after each step.
+
+Basset closure (as history.py for spheres): the history force is held at I_n over the
+stages; at the end of the step the newest sample is implicit, which for a rigid body
+couples the components: (M_b + (Δt/2) γ₀ C_b) q_{n+1} = M_b q* − (Δt/2) Σ_k J_kᵀ c_k
+(I*_k − γ₀ u_f,k − I_k,n), with J_k q = v + ω × r_k, c_k = (3/2)√π d_k²/√Re* and
+C_b = Σ c_k J_kᵀ J_k; one 6×6 solve per grain and step. All components restart their
+memory together at release and at every bed impact (history.py explains why).
+
+Bed (virtual rough bed, bed.py). The grain touches the bed when its lowest component
+sphere's bottom reaches y = 0. As for spheres, the crossing is located by linear
+interpolation within the step (centre of mass moved back along v, orientation turned
+back by Ω), the contact normal n is drawn by ``bed.virtual_bed_normal`` from the
+velocity of that component's centre, and the impulse acts at the contact point
+r_c = R r_k − (d_k/2) n with the rigid-body collision matrix
+K = 1/m − [r_c]× I_w⁻¹ [r_c]× (rigid mass and inertia, no added mass — as the sphere
+rebound of SPEC §4): Newton restitution e on the normal contact-point velocity, and
+Coulomb friction f — sticking (J = K⁻¹ Δc, tangential contact velocity brought to
+zero) if |J_t| ≤ f J_n, else sliding opposite to the initial tangential slip. For a
+sphere this is exactly SPEC §4. With sliding on a non-spherical body the fixed slip
+direction can in rare configurations add energy; the impulse is then replaced by the
+frictionless one (checked each time). If the contact point still descends afterwards,
+a second impact on the horizontal bed follows (as ``bed.bed_rebound``). Jump height
+is the highest elevation of the grain's lowest point above the bed top.
+
+Not here: grain–grain contacts between composites (cells.py/contacts.py act on
+spheres; the composite run refuses collisions.model other than "off").
+"""
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+from numba import njit, prange
+
+from flowfields.sampler import ABOVE_TOP, sample_column, sample_point, vorticity_from_gradient
+
+from . import history
+from .bed import virtual_bed_normal
+from .forces import (CL, CM, C_OMEGA, COS_SLOPE, ON_ADDED_MASS, ON_BASSET, ON_DRAG,
+                     ON_FLUID_ACC, ON_LIFT, ON_MAGNUS, ON_WEIGHT, RE_STAR, SIN_SLOPE,
+                     TAU_STAR, drag_factor)
+from .history import META_COUNT, _advance, _integral3, history_reset
+from .rng import uniform2
+from .spin import SPIN_TABLE_C, _spin_row
+
+OK = 0
+NOT_FINITE = 1
+JUMP_FIELDS = 4
+NX = 13  # x(3) v(3) q(4) Ω(3)
+SQRT_PI = math.sqrt(math.pi)
+
+
+class ClusterState(NamedTuple):
+    pos: np.ndarray  # (N,3) centre of mass; x, z unwrapped; y above the bed top (Dn)
+    vel: np.ndarray  # (N,3) u*
+    quat: np.ndarray  # (N,4) body → world, scalar first
+    omega: np.ndarray  # (N,3) world frame, u*/Dn
+    mass: np.ndarray  # (N,) rigid mass (1+R)V, ρDn³
+    volume: np.ndarray  # (N,) V (Dn³)
+    inertia: np.ndarray  # (N,3,3) rigid inertia, body frame
+    inertia_inv: np.ndarray  # (N,3,3)
+    mmat: np.ndarray  # (N,6,6) generalized mass M_b incl. added mass
+    mmat_inv: np.ndarray  # (N,6,6)
+    cbas: np.ndarray  # (N,6,6) Basset coupling C_b = Σ c_k J_kᵀ J_k
+    s_am: np.ndarray  # (N,3) added-mass first moment S (body)
+    i_total: np.ndarray  # (N,3,3) I_b + I_a (body)
+    cstart: np.ndarray  # (N+1,) int64 first component of each grain
+    r_body: np.ndarray  # (K,3)
+    d_comp: np.ndarray  # (K,)
+    w_comp: np.ndarray  # (K,)
+    jump_t0: np.ndarray
+    jump_x0: np.ndarray
+    jump_ymax: np.ndarray  # highest elevation of the grain's lowest point this jump
+    jump_count: np.ndarray
+    impacts: np.ndarray
+    jump_buf: np.ndarray  # (N, cap, 4)
+    jump_buf_n: np.ndarray
+    status: np.ndarray
+    above_top: np.ndarray
+    hist_slip: np.ndarray  # (K, N_w+2, 3)
+    hist_meta: np.ndarray  # (K, 2) int64
+    hist_tail: np.ndarray  # (K, 10, 3)
+    hist_i: np.ndarray  # (K, 3)
+    fresh: np.ndarray  # (N,) 1 when the component samples hold the fluid now
+    spin_drag: np.ndarray  # (1,) 1.0: rotational drag of the components on (0.0: vacuum)
+
+
+class ClusterWork(NamedTuple):
+    uf: np.ndarray  # (K,3)
+    grad: np.ndarray  # (K,3,3)
+    dudt: np.ndarray  # (K,3)
+    vort: np.ndarray  # (K,3)
+    uf_top: np.ndarray  # (K,3)
+    uf_bot: np.ndarray  # (K,3)
+    rw: np.ndarray  # (K,3) world offsets of the components at the stage
+    x0: np.ndarray  # (N,13)
+    x: np.ndarray  # (N,13)
+    k: np.ndarray  # (N,4,13)
+    rot: np.ndarray  # (N,3,3)
+    ft: np.ndarray  # (N,6) force, torque (world), then body, then accelerations
+    aug: np.ndarray  # (N,6,7) 6×6 solve
+    vec: np.ndarray  # (N,12) scratch vectors
+
+
+# --------------------------------------------------------------------- set-up (Python)
+def grain_matrices(centres, diameters, volume, second_moment, R, Cm, re_star):
+    """Body-frame mass properties of one grain in particle units (lengths in Dn).
+
+    Returns dict(mass, inertia, mmat, cbas, s_am, i_total, w) — see module docstring."""
+    r = np.asarray(centres, float)
+    d = np.asarray(diameters, float)
+    vk = math.pi / 6.0 * d**3
+    w = vk * (volume / vk.sum())
+    m = (1.0 + R) * volume
+    inertia = (1.0 + R) * np.asarray(second_moment, float)
+    s = Cm * (w[:, None] * r).sum(axis=0)
+    ia = Cm * sum(wk * ((rk @ rk) * np.eye(3) - np.outer(rk, rk)) for wk, rk in zip(w, r))
+    it = inertia + ia
+
+    def cross(v):
+        return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+
+    mm = np.zeros((6, 6))
+    mm[:3, :3] = (m + Cm * volume) * np.eye(3)
+    mm[:3, 3:] = -cross(s)
+    mm[3:, :3] = cross(s)
+    mm[3:, 3:] = it
+    cb = np.zeros((6, 6))
+    for dk, rk in zip(d, r):
+        ck = 1.5 * SQRT_PI * dk * dk / math.sqrt(re_star)
+        jk = np.hstack([np.eye(3), -cross(rk)])  # u_k = v + ω × r = v − [r]× ω
+        cb += ck * jk.T @ jk
+    return dict(mass=m, inertia=inertia, mmat=mm, cbas=cb, s_am=s, i_total=it, w=w)
+
+
+def make_cluster_state(composites, pos, vel, quat, omega, t0, n_window, *, R, Cm, re_star,
+                       jump_capacity=16, spin_drag=True) -> ClusterState:
+    """State for grains given as shapes.Composite in particle units (lengths in Dn; use
+    ``composite.scaled(1/Dn)``). pos/vel/omega (N,3), quat (N,4). Cm: added-mass
+    coefficient of the inertia (pass coef[CM]); spin_drag=False switches off the
+    components' rotational drag (with every force off and Cm = 0: a grain in vacuum, for
+    the rigid-body checks; the sphere model has no such switch)."""
+    n = len(composites)
+    counts = np.array([c.n_spheres for c in composites], dtype=np.int64)
+    cstart = np.zeros(n + 1, dtype=np.int64)
+    cstart[1:] = np.cumsum(counts)
+    kt = int(cstart[-1])
+    r_body = np.zeros((kt, 3))
+    d_comp = np.zeros(kt)
+    w_comp = np.zeros(kt)
+    mass = np.zeros(n)
+    volume = np.zeros(n)
+    inertia = np.zeros((n, 3, 3))
+    mm = np.zeros((n, 6, 6))
+    cb = np.zeros((n, 6, 6))
+    s_am = np.zeros((n, 3))
+    it = np.zeros((n, 3, 3))
+    for i, c in enumerate(composites):
+        g = grain_matrices(c.centres, c.diameters, c.volume, c.second_moment, R, Cm, re_star)
+        a, b = cstart[i], cstart[i + 1]
+        r_body[a:b] = c.centres
+        d_comp[a:b] = c.diameters
+        w_comp[a:b] = g["w"]
+        mass[i] = g["mass"]
+        volume[i] = c.volume
+        inertia[i] = g["inertia"]
+        mm[i] = g["mmat"]
+        cb[i] = g["cbas"]
+        s_am[i] = g["s_am"]
+        it[i] = g["i_total"]
+    q = np.array(quat, dtype=np.float64)
+    q /= np.linalg.norm(q, axis=1)[:, None]
+    hs = history.allocate_history_state(kt, n_window)
+    p = np.array(pos, dtype=np.float64)
+    st = ClusterState(
+        p, np.array(vel, dtype=np.float64), q, np.array(omega, dtype=np.float64), mass, volume,
+        inertia, np.linalg.inv(inertia), mm, np.linalg.inv(mm), cb, s_am, it, cstart, r_body,
+        d_comp, w_comp, np.full(n, float(t0)), p[:, 0].copy(), np.zeros(n),
+        np.zeros(n, dtype=np.int64), np.zeros(n, dtype=np.int64),
+        np.zeros((n, jump_capacity, JUMP_FIELDS)), np.zeros(n, dtype=np.int64),
+        np.zeros(n, dtype=np.int64), np.zeros(n, dtype=np.int64), hs.slip_hist, hs.meta,
+        hs.tail, np.zeros((kt, 3)), np.zeros(n, dtype=np.int64),
+        np.array([1.0 if spin_drag else 0.0]))
+    low = lowest_points(st)
+    st.jump_ymax[:] = low
+    return st
+
+
+def make_cluster_work(st: ClusterState) -> ClusterWork:
+    n = st.pos.shape[0]
+    kt = st.r_body.shape[0]
+    e = lambda: np.zeros((kt, 3))  # noqa: E731
+    return ClusterWork(e(), np.zeros((kt, 3, 3)), e(), e(), e(), e(), e(), np.zeros((n, NX)),
+                       np.zeros((n, NX)), np.zeros((n, 4, NX)), np.zeros((n, 3, 3)),
+                       np.zeros((n, 24)), np.zeros((n, 6, 7)), np.zeros((n, 12)))
+
+
+def lowest_points(st: ClusterState) -> np.ndarray:
+    """Elevation of each grain's lowest point above the bed top (Dn)."""
+    out = np.zeros(st.pos.shape[0])
+    for p in range(st.pos.shape[0]):
+        rot = quat_to_matrix_py(st.quat[p])
+        a, b = st.cstart[p], st.cstart[p + 1]
+        y = st.pos[p, 1] + st.r_body[a:b] @ rot[1] - 0.5 * st.d_comp[a:b]
+        out[p] = y.min()
+    return out
+
+
+def quat_to_matrix_py(q):
+    m = np.zeros((3, 3))
+    _quat_to_matrix(q[0], q[1], q[2], q[3], m)
+    return m
+
+
+def world_centres(st: ClusterState, p: int) -> np.ndarray:
+    """World positions (Dn) of grain p's component spheres."""
+    rot = quat_to_matrix_py(st.quat[p])
+    a, b = st.cstart[p], st.cstart[p + 1]
+    return st.pos[p] + st.r_body[a:b] @ rot.T
+
+
+# --------------------------------------------------------------------- small kernels
+@njit(cache=True, _nrt=False)
+def _quat_to_matrix(w, x, y, z, m):
+    m[0, 0] = 1.0 - 2.0 * (y * y + z * z)
+    m[0, 1] = 2.0 * (x * y - w * z)
+    m[0, 2] = 2.0 * (x * z + w * y)
+    m[1, 0] = 2.0 * (x * y + w * z)
+    m[1, 1] = 1.0 - 2.0 * (x * x + z * z)
+    m[1, 2] = 2.0 * (y * z - w * x)
+    m[2, 0] = 2.0 * (x * z - w * y)
+    m[2, 1] = 2.0 * (y * z + w * x)
+    m[2, 2] = 1.0 - 2.0 * (x * x + y * y)
+
+
+@njit(cache=True, _nrt=False)
+def _rotate_quat(x, o, h):
+    """q ← exp(h Ω/2 as a rotation vector) ⊗ q for q = x[6:10], Ω = o (world), exact."""
+    ang = h * math.sqrt(o[0] * o[0] + o[1] * o[1] + o[2] * o[2])
+    if ang == 0.0:
+        return
+    s = math.sin(0.5 * ang) / (ang / h)
+    c = math.cos(0.5 * ang)
+    a0, a1, a2, a3 = c, s * o[0], s * o[1], s * o[2]
+    w, xx, y, z = x[6], x[7], x[8], x[9]
+    x[6] = a0 * w - a1 * xx - a2 * y - a3 * z
+    x[7] = a0 * xx + a1 * w + a2 * z - a3 * y
+    x[8] = a0 * y - a1 * z + a2 * w + a3 * xx
+    x[9] = a0 * z + a1 * y - a2 * xx + a3 * w
+
+
+@njit(cache=True, _nrt=False)
+def _solve6(aug, out):
+    """Gaussian elimination with partial pivoting on the augmented (6, 7) matrix."""
+    for c in range(6):
+        piv = c
+        big = abs(aug[c, c])
+        for r in range(c + 1, 6):
+            if abs(aug[r, c]) > big:
+                big = abs(aug[r, c])
+                piv = r
+        if piv != c:
+            for j in range(7):
+                tmp = aug[c, j]
+                aug[c, j] = aug[piv, j]
+                aug[piv, j] = tmp
+        inv = 1.0 / aug[c, c]
+        for r in range(c + 1, 6):
+            f = aug[r, c] * inv
+            if f != 0.0:
+                for j in range(c, 7):
+                    aug[r, j] -= f * aug[c, j]
+    for c in range(5, -1, -1):
+        s = aug[c, 6]
+        for j in range(c + 1, 6):
+            s -= aug[c, j] * out[j]
+        out[c] = s / aug[c, c]
+
+
+@njit(cache=True, _nrt=False, error_model="numpy")
+def _sample_component(f, re_star, x, y, z, t, radius, with_lift, uf, grad, dudt, vort, uf_top, uf_bot):
+    # flow.fluid_at_grain with the component's own radius for the lift heights
+    xp = x * re_star
+    yp = y * re_star
+    zp = z * re_star
+    tp = t * re_star
+    if with_lift:
+        status = sample_column(f, xp, yp, zp, tp, (y + radius) * re_star, (y - radius) * re_star,
+                               uf, grad, dudt, uf_top, uf_bot)
+    else:
+        status = sample_point(f, xp, yp, zp, tp, uf, grad, dudt)
+    for i in range(3):
+        dudt[i] *= re_star
+        for j in range(3):
+            grad[i, j] *= re_star
+    vorticity_from_gradient(grad, vort)
+    return 1 if status == ABOVE_TOP else 0
+
+
+@njit(cache=True, _nrt=False, error_model="numpy")
+def _sample_grain(f, coef, st, w, p, x, t):
+    """Fluid at every component of grain p for the stage state x; fills w.rw."""
+    rot = w.rot[p]
+    _quat_to_matrix(x[6], x[7], x[8], x[9], rot)
+    with_lift = coef[ON_LIFT] != 0.0
+    above = 0
+    for k in range(st.cstart[p], st.cstart[p + 1]):
+        for i in range(3):
+            w.rw[k, i] = rot[i, 0] * st.r_body[k, 0] + rot[i, 1] * st.r_body[k, 1] + rot[i, 2] * st.r_body[k, 2]
+        above |= _sample_component(f, coef[RE_STAR], x[0] + w.rw[k, 0], x[1] + w.rw[k, 1], x[2] + w.rw[k, 2], t,
+                                   0.5 * st.d_comp[k], with_lift, w.uf[k], w.grad[k], w.dudt[k], w.vort[k],
+                                   w.uf_top[k], w.uf_bot[k])
+    return above
+
+
+@njit(cache=True, _nrt=False, error_model="numpy")
+def _rhs(coef, st, w, p, x, kout, with_basset):
+    """Stage derivative kout (13) of grain p at state x; fluid already sampled there."""
+    re_star = coef[RE_STAR]
+    ft = w.ft[p]
+    for i in range(6):
+        ft[i] = 0.0
+    ox, oy, oz = x[10], x[11], x[12]
+    cm = coef[CM]
+    for k in range(st.cstart[p], st.cstart[p + 1]):
+        dk = st.d_comp[k]
+        rx, ry, rz = w.rw[k, 0], w.rw[k, 1], w.rw[k, 2]
+        # component velocity u_k = v + Ω × r
+        u0 = x[3] + oy * rz - oz * ry
+        u1 = x[4] + oz * rx - ox * rz
+        u2 = x[5] + ox * ry - oy * rx
+        uf = w.uf[k]
+        r0 = u0 - uf[0]
+        r1 = u1 - uf[1]
+        r2 = u2 - uf[2]
+        f0 = 0.0
+        f1 = 0.0
+        f2 = 0.0
+        a2 = math.pi / 8.0 * dk * dk
+        if coef[ON_DRAG] != 0.0:
+            ur = math.sqrt(r0 * r0 + r1 * r1 + r2 * r2)
+            c = -a2 * drag_factor(ur, dk * re_star)
+            f0 += c * r0
+            f1 += c * r1
+            f2 += c * r2
+        if coef[ON_LIFT] != 0.0:
+            t0 = u0 - w.uf_top[k, 0]
+            t1 = u1 - w.uf_top[k, 1]
+            t2 = u2 - w.uf_top[k, 2]
+            b0 = u0 - w.uf_bot[k, 0]
+            b1 = u1 - w.uf_bot[k, 1]
+            b2 = u2 - w.uf_bot[k, 2]
+            f1 += a2 * coef[CL] * ((t0 * t0 + t1 * t1 + t2 * t2) - (b0 * b0 + b1 * b1 + b2 * b2))
+        vort = w.vort[k]
+        s0 = ox - 0.5 * vort[0]
+        s1 = oy - 0.5 * vort[1]
+        s2 = oz - 0.5 * vort[2]
+        if coef[ON_MAGNUS] != 0.0:
+            c = a2 * dk * coef[C_OMEGA]
+            f0 += c * (s1 * r2 - s2 * r1)
+            f1 += c * (s2 * r0 - s0 * r2)
+            f2 += c * (s0 * r1 - s1 * r0)
+        g = w.grad[k]
+        dt_ = w.dudt[k]
+        wk = st.w_comp[k]
+        if coef[ON_ADDED_MASS] != 0.0:
+            c = cm * wk
+            f0 += c * (dt_[0] + g[0, 0] * u0 + g[0, 1] * u1 + g[0, 2] * u2)
+            f1 += c * (dt_[1] + g[1, 0] * u0 + g[1, 1] * u1 + g[1, 2] * u2)
+            f2 += c * (dt_[2] + g[2, 0] * u0 + g[2, 1] * u1 + g[2, 2] * u2)
+        if coef[ON_FLUID_ACC] != 0.0:
+            f0 += wk * (dt_[0] + g[0, 0] * uf[0] + g[0, 1] * uf[1] + g[0, 2] * uf[2])
+            f1 += wk * (dt_[1] + g[1, 0] * uf[0] + g[1, 1] * uf[1] + g[1, 2] * uf[2])
+            f2 += wk * (dt_[2] + g[2, 0] * uf[0] + g[2, 1] * uf[1] + g[2, 2] * uf[2])
+        if with_basset:
+            c = -1.5 * SQRT_PI * dk * dk / math.sqrt(re_star)
+            f0 += c * st.hist_i[k, 0]
+            f1 += c * st.hist_i[k, 1]
+            f2 += c * st.hist_i[k, 2]
+        ft[0] += f0
+        ft[1] += f1
+        ft[2] += f2
+        ft[3] += ry * f2 - rz * f1
+        ft[4] += rz * f0 - rx * f2
+        ft[5] += rx * f1 - ry * f0
+        # rotational drag of the component spinning with the body (spin.py, SPEC §2)
+        wr = math.sqrt(s0 * s0 + s1 * s1 + s2 * s2)
+        re_r = 0.25 * wr * re_star * dk * dk
+        row = _spin_row(re_r)
+        cw_wr = 4.0 / (re_star * dk * dk) * (SPIN_TABLE_C[row, 0] * math.sqrt(re_r) + SPIN_TABLE_C[row, 1]
+                                             + SPIN_TABLE_C[row, 2] * re_r * re_r)
+        c = -(dk ** 5) / 64.0 * cw_wr * st.spin_drag[0]
+        ft[3] += c * s0
+        ft[4] += c * s1
+        ft[5] += c * s2
+    if coef[ON_WEIGHT] != 0.0:
+        gw = st.volume[p] / coef[TAU_STAR]
+        ft[0] += gw * coef[SIN_SLOPE]
+        ft[1] -= gw * coef[COS_SLOPE]
+    _accelerations(st, w, p, x, ft)
+    for i in range(3):
+        kout[i] = x[3 + i]
+        kout[3 + i] = ft[18 + i]
+        kout[10 + i] = ft[21 + i]
+    # dq/dt = ½ (0, Ω) ⊗ q
+    qw, qx, qy, qz = x[6], x[7], x[8], x[9]
+    kout[6] = 0.5 * (-ox * qx - oy * qy - oz * qz)
+    kout[7] = 0.5 * (ox * qw + oy * qz - oz * qy)
+    kout[8] = 0.5 * (oy * qw + oz * qx - ox * qz)
+    kout[9] = 0.5 * (oz * qw + ox * qy - oy * qx)
+
+
+@njit(cache=True, _nrt=False, error_model="numpy")
+def _accelerations(st, w, p, x, ft):
+    """ft[0:6] = world force and torque → ft[18:24] = world (a, α) via the body-frame
+    generalized mass (module docstring)."""
+    rot = w.rot[p]
+    ob = w.vec[p]
+    # body-frame Ω and loads
+    for i in range(3):
+        ob[i] = rot[0, i] * x[10] + rot[1, i] * x[11] + rot[2, i] * x[12]
+        ft[6 + i] = rot[0, i] * ft[0] + rot[1, i] * ft[1] + rot[2, i] * ft[2]
+        ft[9 + i] = rot[0, i] * ft[3] + rot[1, i] * ft[4] + rot[2, i] * ft[5]
+    s = st.s_am[p]
+    it = st.i_total[p]
+    # − ω × (ω × S)
+    c0 = ob[1] * s[2] - ob[2] * s[1]
+    c1 = ob[2] * s[0] - ob[0] * s[2]
+    c2 = ob[0] * s[1] - ob[1] * s[0]
+    ft[6] -= ob[1] * c2 - ob[2] * c1
+    ft[7] -= ob[2] * c0 - ob[0] * c2
+    ft[8] -= ob[0] * c1 - ob[1] * c0
+    # − ω × (I ω)
+    l0 = it[0, 0] * ob[0] + it[0, 1] * ob[1] + it[0, 2] * ob[2]
+    l1 = it[1, 0] * ob[0] + it[1, 1] * ob[1] + it[1, 2] * ob[2]
+    l2 = it[2, 0] * ob[0] + it[2, 1] * ob[1] + it[2, 2] * ob[2]
+    ft[9] -= ob[1] * l2 - ob[2] * l1
+    ft[10] -= ob[2] * l0 - ob[0] * l2
+    ft[11] -= ob[0] * l1 - ob[1] * l0
+    mi = st.mmat_inv[p]
+    for i in range(6):
+        acc = 0.0
+        for j in range(6):
+            acc += mi[i, j] * ft[6 + j]
+        ft[12 + i] = acc
+    for i in range(3):
+        ft[18 + i] = rot[i, 0] * ft[12] + rot[i, 1] * ft[13] + rot[i, 2] * ft[14]
+        ft[21 + i] = rot[i, 0] * ft[15] + rot[i, 1] * ft[16] + rot[i, 2] * ft[17]
+
+
+@njit(cache=True, _nrt=False, error_model="numpy")
+def _basset_end_step(coef, st, w, hc, p, dt):
+    """Implicit newest-sample closure of the history force for the rigid grain (module
+    docstring); the fluid at the new positions is in w.uf. Updates vel, omega, history."""
+    re_star = coef[RE_STAR]
+    rot = w.rot[p]
+    a = st.cstart[p]
+    b = st.cstart[p + 1]
+    h = 0.5 * dt
+    aug = w.aug[p]
+    mm = st.mmat[p]
+    cb = st.cbas[p]
+    g0 = 0.0
+    rhs = w.ft[p]  # body-frame generalized rhs in ft[0:6]
+    vb = w.vec[p]
+    for i in range(3):
+        vb[i] = rot[0, i] * st.vel[p, 0] + rot[1, i] * st.vel[p, 1] + rot[2, i] * st.vel[p, 2]
+        vb[3 + i] = rot[0, i] * st.omega[p, 0] + rot[1, i] * st.omega[p, 1] + rot[2, i] * st.omega[p, 2]
+    for i in range(6):
+        acc = 0.0
+        for j in range(6):
+            acc += mm[i, j] * vb[j]
+        rhs[i] = acc
+    for k in range(a, b):
+        head = _advance(st.hist_slip[k], st.hist_meta[k], st.hist_tail[k], hc.tail_decay, hc.tail_c_old,
+                        hc.tail_c_new)
+        for c in range(3):
+            st.hist_slip[k, head, c] = 0.0
+        i0, i1, i2 = _integral3(st.hist_slip[k], st.hist_meta[k], st.hist_tail[k], hc.window_weights,
+                                hc.tail_weight)
+        row = min(st.hist_meta[k, META_COUNT], hc.window_weights.shape[0] - 1)
+        g0 = hc.window_weights[row, 0]
+        ck = 1.5 * SQRT_PI * st.d_comp[k] ** 2 / math.sqrt(re_star)
+        # world vector e = I* − γ₀ u_f − I_n, kept in ft[6:9] for the push below
+        e0 = i0 - g0 * w.uf[k, 0] - st.hist_i[k, 0]
+        e1 = i1 - g0 * w.uf[k, 1] - st.hist_i[k, 1]
+        e2 = i2 - g0 * w.uf[k, 2] - st.hist_i[k, 2]
+        # keep I* for the update of I_{n+1}
+        st.hist_i[k, 0] = i0
+        st.hist_i[k, 1] = i1
+        st.hist_i[k, 2] = i2
+        # body frame, J_kᵀ e = (e, r × e)
+        eb0 = rot[0, 0] * e0 + rot[1, 0] * e1 + rot[2, 0] * e2
+        eb1 = rot[0, 1] * e0 + rot[1, 1] * e1 + rot[2, 1] * e2
+        eb2 = rot[0, 2] * e0 + rot[1, 2] * e1 + rot[2, 2] * e2
+        rx, ry, rz = st.r_body[k, 0], st.r_body[k, 1], st.r_body[k, 2]
+        c = h * ck
+        rhs[0] -= c * eb0
+        rhs[1] -= c * eb1
+        rhs[2] -= c * eb2
+        rhs[3] -= c * (ry * eb2 - rz * eb1)
+        rhs[4] -= c * (rz * eb0 - rx * eb2)
+        rhs[5] -= c * (rx * eb1 - ry * eb0)
+    for i in range(6):
+        for j in range(6):
+            aug[i, j] = mm[i, j] + h * g0 * cb[i, j]
+        aug[i, 6] = rhs[i]
+    _solve6(aug, vb)
+    for i in range(3):
+        st.vel[p, i] = rot[i, 0] * vb[0] + rot[i, 1] * vb[1] + rot[i, 2] * vb[2]
+        st.omega[p, i] = rot[i, 0] * vb[3] + rot[i, 1] * vb[4] + rot[i, 2] * vb[5]
+    ox, oy, oz = st.omega[p, 0], st.omega[p, 1], st.omega[p, 2]
+    for k in range(a, b):
+        rx, ry, rz = w.rw[k, 0], w.rw[k, 1], w.rw[k, 2]
+        s0 = st.vel[p, 0] + oy * rz - oz * ry - w.uf[k, 0]
+        s1 = st.vel[p, 1] + oz * rx - ox * rz - w.uf[k, 1]
+        s2 = st.vel[p, 2] + ox * ry - oy * rx - w.uf[k, 2]
+        head = st.hist_meta[k, 0]
+        st.hist_slip[k, head, 0] = s0
+        st.hist_slip[k, head, 1] = s1
+        st.hist_slip[k, head, 2] = s2
+        st.hist_i[k, 0] += g0 * s0
+        st.hist_i[k, 1] += g0 * s1
+        st.hist_i[k, 2] += g0 * s2
+
+
+@njit(cache=True, _nrt=False, error_model="numpy")
+def _lowest(st, w, p, px, py, pz, q0, q1, q2, q3):
+    """(lowest bottom elevation, its component) for the grain at (p·, q·)."""
+    rot = w.rot[p]
+    _quat_to_matrix(q0, q1, q2, q3, rot)
+    best = 1e300
+    kb = st.cstart[p]
+    for k in range(st.cstart[p], st.cstart[p + 1]):
+        y = py + rot[1, 0] * st.r_body[k, 0] + rot[1, 1] * st.r_body[k, 1] + rot[1, 2] * st.r_body[k, 2] \
+            - 0.5 * st.d_comp[k]
+        if y < best:
+            best = y
+            kb = k
+    return best, kb
+
+
+@njit(cache=True, _nrt=False, error_model="numpy")
+def _impulse(st, p, rcx, rcy, rcz, n0, n1, n2, e, fr, iw):
+    """Rigid-body impact at contact offset r_c with unit normal n (module docstring).
+    iw: (3,3) world inverse inertia. Returns 1 if an impulse was applied."""
+    v = st.vel[p]
+    o = st.omega[p]
+    m = st.mass[p]
+    c0 = v[0] + o[1] * rcz - o[2] * rcy
+    c1 = v[1] + o[2] * rcx - o[0] * rcz
+    c2 = v[2] + o[0] * rcy - o[1] * rcx
+    cn = c0 * n0 + c1 * n1 + c2 * n2
+    if cn >= 0.0:
+        return 0
+    ct0 = c0 - cn * n0
+    ct1 = c1 - cn * n1
+    ct2 = c2 - cn * n2
+    # K = 1/m − [r]× I⁻¹ [r]× as a 3×3 (K x = x/m + r × (I⁻¹ (x × r)) ... written out)
+    k00 = k01 = k02 = k10 = k11 = k12 = k20 = k21 = k22 = 0.0
+    for col in range(3):
+        x0 = 1.0 if col == 0 else 0.0
+        x1 = 1.0 if col == 1 else 0.0
+        x2 = 1.0 if col == 2 else 0.0
+        # y = I⁻¹ (r × x);  K x = x/m + (I⁻¹(r × x)) × r
+        a0 = rcy * x2 - rcz * x1
+        a1 = rcz * x0 - rcx * x2
+        a2 = rcx * x1 - rcy * x0
+        y0 = iw[0, 0] * a0 + iw[0, 1] * a1 + iw[0, 2] * a2
+        y1 = iw[1, 0] * a0 + iw[1, 1] * a1 + iw[1, 2] * a2
+        y2 = iw[2, 0] * a0 + iw[2, 1] * a1 + iw[2, 2] * a2
+        z0 = x0 / m + y1 * rcz - y2 * rcy
+        z1 = x1 / m + y2 * rcx - y0 * rcz
+        z2 = x2 / m + y0 * rcy - y1 * rcx
+        if col == 0:
+            k00, k10, k20 = z0, z1, z2
+        elif col == 1:
+            k01, k11, k21 = z0, z1, z2
+        else:
+            k02, k12, k22 = z0, z1, z2
+    # sticking: Δc = −(1+e) c_n n − c_t ;  J = K⁻¹ Δc (Cramer)
+    d0 = -(1.0 + e) * cn * n0 - ct0
+    d1 = -(1.0 + e) * cn * n1 - ct1
+    d2 = -(1.0 + e) * cn * n2 - ct2
+    det = k00 * (k11 * k22 - k12 * k21) - k01 * (k10 * k22 - k12 * k20) + k02 * (k10 * k21 - k11 * k20)
+    j0 = (d0 * (k11 * k22 - k12 * k21) - k01 * (d1 * k22 - k12 * d2) + k02 * (d1 * k21 - k11 * d2)) / det
+    j1 = (k00 * (d1 * k22 - k12 * d2) - d0 * (k10 * k22 - k12 * k20) + k02 * (k10 * d2 - d1 * k20)) / det
+    j2 = (k00 * (k11 * d2 - d1 * k21) - k01 * (k10 * d2 - d1 * k20) + d0 * (k10 * k21 - k11 * k20)) / det
+    jn = j0 * n0 + j1 * n1 + j2 * n2
+    jt0 = j0 - jn * n0
+    jt1 = j1 - jn * n1
+    jt2 = j2 - jn * n2
+    ct = math.sqrt(ct0 * ct0 + ct1 * ct1 + ct2 * ct2)
+    if math.sqrt(jt0 * jt0 + jt1 * jt1 + jt2 * jt2) > fr * jn and ct > 0.0:
+        # sliding: J = j (n − f t̂), n·(c + K J) = −e c_n
+        u0 = n0 - fr * ct0 / ct
+        u1 = n1 - fr * ct1 / ct
+        u2 = n2 - fr * ct2 / ct
+        ku = n0 * (k00 * u0 + k01 * u1 + k02 * u2) + n1 * (k10 * u0 + k11 * u1 + k12 * u2) \
+            + n2 * (k20 * u0 + k21 * u1 + k22 * u2)
+        if ku > 0.0:
+            jj = -(1.0 + e) * cn / ku
+            j0, j1, j2 = jj * u0, jj * u1, jj * u2
+        else:
+            j0 = j1 = j2 = 1e300  # marker: frictionless below
+    ke0 = _kinetic(st, p, iw)
+    if j0 < 1e299:
+        _apply(st, p, j0, j1, j2, rcx, rcy, rcz, iw)
+        if _kinetic(st, p, iw) <= ke0 * (1.0 + 1e-12):
+            return 1
+        _apply(st, p, -j0, -j1, -j2, rcx, rcy, rcz, iw)
+    # frictionless fallback: J = j n, j = −(1+e) c_n / (n·K n)
+    kn = n0 * (k00 * n0 + k01 * n1 + k02 * n2) + n1 * (k10 * n0 + k11 * n1 + k12 * n2) \
+        + n2 * (k20 * n0 + k21 * n1 + k22 * n2)
+    jj = -(1.0 + e) * cn / kn
+    _apply(st, p, jj * n0, jj * n1, jj * n2, rcx, rcy, rcz, iw)
+    return 1
+
+
+@njit(cache=True, _nrt=False)
+def _kinetic(st, p, iw):
+    # rigid kinetic energy ½ m v² + ½ Ω·I Ω with I = iw⁻¹ (use L = I Ω via solve-free form)
+    v = st.vel[p]
+    o = st.omega[p]
+    ke = 0.5 * st.mass[p] * (v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
+    # Ω·IΩ: I Ω from the body inertia
+    return ke + 0.5 * _omega_i_omega(st, p)
+
+
+@njit(cache=True, _nrt=False)
+def _omega_i_omega(st, p):
+    q = st.quat[p]
+    w, x, y, z = q[0], q[1], q[2], q[3]
+    # body Ω = Rᵀ Ω
+    r00 = 1.0 - 2.0 * (y * y + z * z)
+    r01 = 2.0 * (x * y - w * z)
+    r02 = 2.0 * (x * z + w * y)
+    r10 = 2.0 * (x * y + w * z)
+    r11 = 1.0 - 2.0 * (x * x + z * z)
+    r12 = 2.0 * (y * z - w * x)
+    r20 = 2.0 * (x * z - w * y)
+    r21 = 2.0 * (y * z + w * x)
+    r22 = 1.0 - 2.0 * (x * x + y * y)
+    o = st.omega[p]
+    b0 = r00 * o[0] + r10 * o[1] + r20 * o[2]
+    b1 = r01 * o[0] + r11 * o[1] + r21 * o[2]
+    b2 = r02 * o[0] + r12 * o[1] + r22 * o[2]
+    i = st.inertia[p]
+    return b0 * (i[0, 0] * b0 + i[0, 1] * b1 + i[0, 2] * b2) + b1 * (i[1, 0] * b0 + i[1, 1] * b1 + i[1, 2] * b2) \
+        + b2 * (i[2, 0] * b0 + i[2, 1] * b1 + i[2, 2] * b2)
+
+
+@njit(cache=True, _nrt=False)
+def _apply(st, p, j0, j1, j2, rcx, rcy, rcz, iw):
+    m = st.mass[p]
+    st.vel[p, 0] += j0 / m
+    st.vel[p, 1] += j1 / m
+    st.vel[p, 2] += j2 / m
+    a0 = rcy * j2 - rcz * j1
+    a1 = rcz * j0 - rcx * j2
+    a2 = rcx * j1 - rcy * j0
+    st.omega[p, 0] += iw[0, 0] * a0 + iw[0, 1] * a1 + iw[0, 2] * a2
+    st.omega[p, 1] += iw[1, 0] * a0 + iw[1, 1] * a1 + iw[1, 2] * a2
+    st.omega[p, 2] += iw[2, 0] * a0 + iw[2, 1] * a1 + iw[2, 2] * a2
+
+
+@njit(cache=True, _nrt=False, error_model="numpy")
+def _world_inverse_inertia(st, w, p, iw):
+    # I_w⁻¹ = R I_b⁻¹ Rᵀ with R of the current orientation (w.rot[p] must hold it)
+    rot = w.rot[p]
+    ib = st.inertia_inv[p]
+    for i in range(3):
+        for j in range(3):
+            s = 0.0
+            for a in range(3):
+                for b in range(3):
+                    s += rot[i, a] * ib[a, b] * rot[j, b]
+            iw[i, j] = s
+
+
+@njit(cache=True, _nrt=False, error_model="numpy")
+def _bed_impact(st, w, p, t, dt, y_old, y_new, bed, seed):
+    """Rebound of grain p on the virtual bed at its lowest component (module docstring)."""
+    frac = 1.0
+    if y_old - y_new > 0.0:
+        frac = min(max(y_old / (y_old - y_new), 0.0), 1.0)
+    back = (1.0 - frac) * dt
+    x = w.x[p]
+    for i in range(3):
+        x[i] = st.pos[p, i] - back * st.vel[p, i]
+    for i in range(4):
+        x[6 + i] = st.quat[p, i]
+    _rotate_quat(x, st.omega[p], -back)
+    t_hit = t + frac * dt
+    low, kb = _lowest(st, w, p, x[0], x[1], x[2], x[6], x[7], x[8], x[9])
+    x[1] -= low  # the lowest point exactly on the bed top at the hit
+    j = st.jump_buf_n[p]
+    if j < st.jump_buf.shape[1]:
+        st.jump_buf[p, j, 0] = st.jump_t0[p]
+        st.jump_buf[p, j, 1] = x[0] - st.jump_x0[p]
+        st.jump_buf[p, j, 2] = st.jump_ymax[p]
+        st.jump_buf[p, j, 3] = t_hit - st.jump_t0[p]
+        st.jump_buf_n[p] = j + 1
+    st.jump_count[p] += 1
+    rot = w.rot[p]  # orientation at the hit (set by _lowest)
+    rx = rot[0, 0] * st.r_body[kb, 0] + rot[0, 1] * st.r_body[kb, 1] + rot[0, 2] * st.r_body[kb, 2]
+    ry = rot[1, 0] * st.r_body[kb, 0] + rot[1, 1] * st.r_body[kb, 1] + rot[1, 2] * st.r_body[kb, 2]
+    rz = rot[2, 0] * st.r_body[kb, 0] + rot[2, 1] * st.r_body[kb, 1] + rot[2, 2] * st.r_body[kb, 2]
+    o = st.omega[p]
+    uc = w.vec[p]
+    uc[0] = st.vel[p, 0] + o[1] * rz - o[2] * ry
+    uc[1] = st.vel[p, 1] + o[2] * rx - o[0] * rz
+    uc[2] = st.vel[p, 2] + o[0] * ry - o[1] * rx
+    n = w.vec[p, 3:6]
+    xi1, xi2 = uniform2(seed, p, st.impacts[p])
+    virtual_bed_normal(uc, xi1, xi2, bed[2], n)
+    iw = w.aug[p, 0:3, 0:3]
+    for i in range(4):
+        st.quat[p, i] = x[6 + i]
+    _world_inverse_inertia(st, w, p, iw)
+    rad = 0.5 * st.d_comp[kb]
+    n0, n1, n2 = n[0], n[1], n[2]
+    _impulse(st, p, rx - rad * n0, ry - rad * n1, rz - rad * n2, n0, n1, n2, bed[0], bed[1], iw)
+    # second impact on the horizontal bed if the contact point still descends (bed.bed_rebound)
+    cy = st.vel[p, 1] + st.omega[p, 2] * rx - st.omega[p, 0] * rz
+    if cy < 0.0:
+        _impulse(st, p, rx, ry - rad, rz, 0.0, 1.0, 0.0, bed[0], bed[1], iw)
+    st.impacts[p] += 1
+    for i in range(3):
+        x[i] += back * st.vel[p, i]
+    _rotate_quat(x, st.omega[p], back)
+    nq = math.sqrt(x[6] * x[6] + x[7] * x[7] + x[8] * x[8] + x[9] * x[9])
+    for i in range(3):
+        st.pos[p, i] = x[i]
+    for i in range(4):
+        st.quat[p, i] = x[6 + i] / nq
+    st.jump_t0[p] = t_hit
+    st.jump_x0[p] = x[0] - back * st.vel[p, 0]
+    low2, _ = _lowest(st, w, p, st.pos[p, 0], st.pos[p, 1], st.pos[p, 2], st.quat[p, 0], st.quat[p, 1],
+                      st.quat[p, 2], st.quat[p, 3])
+    st.jump_ymax[p] = max(low2, 0.0)
+    st.fresh[p] = 0
+    for k in range(st.cstart[p], st.cstart[p + 1]):
+        st.hist_meta[k, META_COUNT] = 0
+
+
+@njit(cache=True, _nrt=False, error_model="numpy")
+def step_grain(f, coef, bed, seed, st, w, hc, p, t, dt):
+    """One RK4 step of composite grain p from t to t + dt, with bed impacts."""
+    with_basset = coef[ON_BASSET] != 0.0
+    x0 = w.x0[p]
+    x = w.x[p]
+    k = w.k[p]
+    for i in range(3):
+        x0[i] = st.pos[p, i]
+        x0[3 + i] = st.vel[p, i]
+        x0[10 + i] = st.omega[p, i]
+    for i in range(4):
+        x0[6 + i] = st.quat[p, i]
+    y_old, _ = _lowest(st, w, p, x0[0], x0[1], x0[2], x0[6], x0[7], x0[8], x0[9])
+    if st.fresh[p] == 0:
+        _sample_grain(f, coef, st, w, p, x0, t)
+    else:
+        # samples are current; only the rotation matrix and offsets are needed
+        _quat_to_matrix(x0[6], x0[7], x0[8], x0[9], w.rot[p])
+        rot = w.rot[p]
+        for kk in range(st.cstart[p], st.cstart[p + 1]):
+            for i in range(3):
+                w.rw[kk, i] = rot[i, 0] * st.r_body[kk, 0] + rot[i, 1] * st.r_body[kk, 1] \
+                    + rot[i, 2] * st.r_body[kk, 2]
+    if with_basset and st.hist_meta[st.cstart[p], META_COUNT] == 0:
+        ox, oy, oz = x0[10], x0[11], x0[12]
+        for kk in range(st.cstart[p], st.cstart[p + 1]):
+            rx, ry, rz = w.rw[kk, 0], w.rw[kk, 1], w.rw[kk, 2]
+            sl = w.ft[p, 0:3]
+            sl[0] = x0[3] + oy * rz - oz * ry - w.uf[kk, 0]
+            sl[1] = x0[4] + oz * rx - ox * rz - w.uf[kk, 1]
+            sl[2] = x0[5] + ox * ry - oy * rx - w.uf[kk, 2]
+            for i in range(3):
+                st.hist_i[kk, i] = 0.0
+            history_reset(sl, st.hist_slip[kk], st.hist_meta[kk], st.hist_tail[kk])
+    _rhs(coef, st, w, p, x0, k[0], with_basset)
+    for stage in range(1, 4):
+        h = 0.5 * dt if stage < 3 else dt
+        for i in range(NX):
+            x[i] = x0[i] + h * k[stage - 1, i]
+        _sample_grain(f, coef, st, w, p, x, t + h)
+        _rhs(coef, st, w, p, x, k[stage], with_basset)
+    for i in range(NX):
+        x[i] = x0[i] + dt / 6.0 * (k[0, i] + 2.0 * k[1, i] + 2.0 * k[2, i] + k[3, i])
+    nq = math.sqrt(x[6] * x[6] + x[7] * x[7] + x[8] * x[8] + x[9] * x[9])
+    for i in range(3):
+        st.pos[p, i] = x[i]
+        st.vel[p, i] = x[3 + i]
+        st.omega[p, i] = x[10 + i]
+    for i in range(4):
+        st.quat[p, i] = x[6 + i] / nq
+    for i in range(NX):
+        if not np.isfinite(x[i]):
+            st.status[p] = NOT_FINITE
+            return
+    _sample_grain(f, coef, st, w, p, x, t + dt)  # next step's stage 1; closes the history
+    for i in range(4):
+        x[6 + i] = st.quat[p, i]
+    _quat_to_matrix(x[6], x[7], x[8], x[9], w.rot[p])
+    st.fresh[p] = 1
+    if with_basset:
+        _basset_end_step(coef, st, w, hc, p, dt)
+    y_new, kb = _lowest(st, w, p, st.pos[p, 0], st.pos[p, 1], st.pos[p, 2], st.quat[p, 0], st.quat[p, 1],
+                        st.quat[p, 2], st.quat[p, 3])
+    if y_new < 0.0:
+        rot = w.rot[p]
+        rx = rot[0, 0] * st.r_body[kb, 0] + rot[0, 1] * st.r_body[kb, 1] + rot[0, 2] * st.r_body[kb, 2]
+        rz = rot[2, 0] * st.r_body[kb, 0] + rot[2, 1] * st.r_body[kb, 1] + rot[2, 2] * st.r_body[kb, 2]
+        # vertical velocity of the lowest component's centre
+        vy = st.vel[p, 1] + st.omega[p, 2] * rx - st.omega[p, 0] * rz
+        if vy < 0.0 and y_old >= 0.0:
+            _bed_impact(st, w, p, t, dt, y_old, y_new, bed, seed)
+        else:
+            # grazing contact without a descending crossing: keep the grain on the bed
+            st.pos[p, 1] -= y_new
+            st.fresh[p] = 0
+            if vy < 0.0:
+                _bed_impact(st, w, p, t, dt, 0.0, 0.0, bed, seed)
+            y_new = 0.0
+    else:
+        if y_new > st.jump_ymax[p]:
+            st.jump_ymax[p] = y_new
+
+
+@njit(cache=True, parallel=True, error_model="numpy")
+def advance_clusters(f, coef, bed, seed, st, w, hc, t0, dt, n_steps, top):
+    """Advance all composite grains n_steps from t0 (as integrator.advance): stops early
+    when a grain is not finite or a jump buffer is full; returns the steps done."""
+    n = st.pos.shape[0]
+    cap = st.jump_buf.shape[1]
+    for s in range(n_steps):
+        t = t0 + s * dt
+        for p in prange(n):
+            if st.status[p] != OK:
+                continue
+            step_grain(f, coef, bed, seed, st, w, hc, p, t, dt)
+            if st.pos[p, 1] > top:
+                st.above_top[p] += 1
+        stop = False
+        for p in range(n):
+            if st.status[p] != OK or st.jump_buf_n[p] >= cap:
+                stop = True
+                break
+        if stop:
+            return s + 1
+    return n_steps
