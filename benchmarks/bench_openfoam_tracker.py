@@ -424,8 +424,12 @@ def _simulation(case, n):
     return Simulation(case, ds, Path(tempfile.gettempdir()) / "bench_openfoam_tracker_unused", progress=False), ds
 
 
-def ours_free(case, pos, u0_particle, n_steps, warm_steps=5):
-    """Free flight (a): ``integrator.advance`` on one thread. Returns timings."""
+def ours_free(case, pos, u0_particle, n_steps, warm_steps=5, frozen=False):
+    """Free flight (a): ``integrator.advance`` on one thread. Returns timings.
+
+    ``frozen``: sample only the dataset's first snapshot (a steady field, as OpenFOAM's
+    frozen U; the same arithmetic — the time blend of one snapshot with itself — on
+    1/62 of the data, so this isolates the memory traffic of the time series)."""
     import numba
 
     from saltation.integrator import advance, make_state, make_workspace
@@ -434,6 +438,8 @@ def ours_free(case, pos, u0_particle, n_steps, warm_steps=5):
     n = len(pos)
     sim, ds = _simulation(case, n)
     f = ds.arrays
+    if frozen:
+        f = f._replace(data=np.ascontiguousarray(f.data[:1]), nt=1, dt=1.0)
     vel = np.tile(np.asarray(u0_particle, dtype=float), (n, 1))
 
     def fresh():
@@ -547,6 +553,59 @@ def ours_contacts(case, pos, u0_particle, n_steps, skin=0.3, warm_steps=2):
     }
 
 
+def ours_contacts_run_loop(case, pos, u0_particle, n_steps, warm_steps=2):
+    """(b) through the run loop's own stepper (``saltation.stepping.Stepper``: free flight
+    → soft contacts sub-stepped only for grains that can touch within the step → bed),
+    one thread, when this checkout has it; else None."""
+    import numba
+
+    try:
+        from saltation.config import load_case, resolve_domain
+        from saltation.integrator import make_state, make_workspace
+        from saltation.run import Simulation, _les_box_m, open_flow
+        from saltation.stepping import Stepper  # noqa: F401  (present = the run loop has contacts)
+    except ImportError:
+        return None
+    numba.set_num_threads(1)
+    n = len(pos)
+    ds = open_flow(case)
+    case_n = load_case(resolve_domain(case, _les_box_m(ds, case)), {"run.n_particles": n})
+    vel0 = np.tile(np.asarray(u0_particle, dtype=float), (n, 1))
+
+    def run(steps):
+        sim = Simulation(case_n, ds, Path(tempfile.gettempdir()) / "bench_openfoam_tracker_unused", progress=False)
+        if not hasattr(sim, "stepper"):
+            return None
+        st, ws = make_state(pos, vel0, np.zeros((n, 3)), 0.0, sim.n_window), make_workspace(n)
+        sim.stepper.start(st.pos)
+        c0, w0 = time.process_time(), time.perf_counter()
+        done = 0
+        while done < steps:
+            done += sim.stepper.advance(ds.arrays, st, ws, done * sim.dt, steps - done, done)
+            st.jump_buf_n[:] = 0
+            if np.any(st.status != 0):
+                raise RuntimeError(f"grain state not finite after {done} steps")
+        return sim, st, time.process_time() - c0, time.perf_counter() - w0
+
+    t0 = time.perf_counter()
+    if run(warm_steps) is None:
+        return None
+    warm = time.perf_counter() - t0
+    load0 = os.getloadavg()
+    sim, st, cpu, wall = run(n_steps)
+    coll = sim.stepper.collisions_summary(st, n_steps * sim.dt)
+    return {
+        "n": n, "steps": n_steps, "cpu_s": round(cpu, 3), "wall_s": round(wall, 3),
+        "particle_steps_per_cpu_s": round(n * n_steps / cpu), "particle_steps_per_s": round(n * n_steps / wall),
+        "timing_split_wall_s": {k: (round(v, 3) if isinstance(v, float) else v)
+                                for k, v in sim.stepper.timing().items()},
+        "substeps_per_step": sim.stepper.n_sub, "collisions": coll.get("particle_particle"),
+        "bed_impacts": coll.get("bed"), "overlap": coll.get("overlap"), "contact_phase": coll.get("contact_phase"),
+        "compile_and_warmup_s": round(warm, 2), "load_before": load0, "load_after": os.getloadavg(),
+        "threads": numba.get_num_threads(),
+    }
+
+
 def openfoam_side(args, par, pos_particle, u0_particle, n_steps, collisions, max_co, work):
     """Write and run the OpenFOAM case; returns the timing dict."""
     mesh_case = Path(args.les_case)
@@ -572,15 +631,16 @@ def main():
     ap.add_argument("--les-case", default=str(DEFAULT_LES_CASE))
     ap.add_argument("--time", default=None, help="LES time directory whose U is frozen (default: first > 0)")
     ap.add_argument("--n-free", type=int, default=10_000)
-    ap.add_argument("--steps-free", type=int, default=200)
-    ap.add_argument("--n-contact", type=int, default=1000)
-    ap.add_argument("--steps-contact", type=int, default=20)
+    ap.add_argument("--steps-free", type=int, default=300)
+    ap.add_argument("--n-contact", type=int, default=2000)
+    ap.add_argument("--steps-contact", type=int, default=40)
     ap.add_argument("--max-co", type=float, nargs="+", default=[1.0, 0.3],
                     help="OpenFOAM maxCo values for (a) (the first also serves (b)): 1 = one Euler "
                          "evaluation per step, its fastest; 0.3 = the tutorials' value, >= 4 "
                          "evaluations per step like our RK4's 4 stages")
     ap.add_argument("--skip", type=int, default=2, help="OpenFOAM steps excluded as start-up")
     ap.add_argument("--u0", type=float, nargs=3, default=(3.0, 1.0, 0.0), help="initial grain velocity, u*")
+    ap.add_argument("--repeat", type=int, default=3, help="interleaved repetitions of (a)")
     ap.add_argument("--only", choices=("free", "contact"), default=None)
     ap.add_argument("--keep", default=None, help="keep the OpenFOAM cases in this folder")
     ap.add_argument("--seed", type=int, default=1)
@@ -590,12 +650,14 @@ def main():
     from saltation import contacts as C
 
     les = Path(args.les_case)
-    if args.time is None:
+    if args.time is None and les.is_dir():
         times = sorted((d.name for d in les.iterdir() if d.is_dir() and _is_number(d.name) and float(d.name) > 0),
                        key=float)
         if not times:
             sys.exit(f"no time directories in {les}")
         args.time = times[0]
+    if not les.is_dir():
+        print(f"note: no OpenFOAM LES case at {les} (--les-case): ours only", file=sys.stderr)
     ds = open_dataset()
     case = load_free_case({"run.seed": args.seed})
     par = tracker_parameters(case, ds.re_tau)
@@ -608,20 +670,40 @@ def main():
 
     if args.only in (None, "free"):
         pos = initial_grains(args.n_free, domain_d, args.seed)
-        res = {"n": args.n_free, "steps": args.steps_free}
-        res["ours"] = ours_free(case, pos, args.u0, args.steps_free)
-        if have_of:
-            for co in args.max_co:
-                of = openfoam_side(args, par, pos, args.u0, args.steps_free, None, co,
-                                   work_root / f"free_maxCo{co:g}")
-                res[f"openfoam_maxCo{co:g}"] = of
-                res[f"ratio_cpu_maxCo{co:g}"] = round(res["ours"]["particle_steps_per_cpu_s"]
-                                                      / of["particle_steps_per_cpu_s"], 2)
+        res = {"n": args.n_free, "steps": args.steps_free, "repeat": args.repeat}
+        runs = {"ours": [], "ours_frozen_snapshot": []}
+        runs.update({f"openfoam_maxCo{co:g}": [] for co in (args.max_co if have_of else [])})
+        for r in range(args.repeat):  # interleaved, so that both codes see the same load
+            runs["ours"].append(ours_free(case, pos, args.u0, args.steps_free))
+            if have_of:
+                for co in args.max_co:
+                    runs[f"openfoam_maxCo{co:g}"].append(
+                        openfoam_side(args, par, pos, args.u0, args.steps_free, None, co, work_root / f"free_maxCo{co:g}"))
+            runs["ours_frozen_snapshot"].append(ours_free(case, pos, args.u0, args.steps_free, frozen=True))
+        for key, lst in runs.items():
+            rates = [x["particle_steps_per_cpu_s"] for x in lst]
+            res[key] = {"particle_steps_per_cpu_s_best": max(rates), "particle_steps_per_cpu_s_all": rates,
+                        "load_1min_all": [round(x["load_before"][0], 2) for x in lst], "last_run": lst[-1]}
+        for co in (args.max_co if have_of else []):
+            key = f"openfoam_maxCo{co:g}"
+            pairs = [a["particle_steps_per_cpu_s"] / b["particle_steps_per_cpu_s"]
+                     for a, b in zip(runs["ours"], runs[key])]
+            res[f"ratio_cpu_maxCo{co:g}"] = {
+                "best_vs_best": round(res["ours"]["particle_steps_per_cpu_s_best"]
+                                      / res[key]["particle_steps_per_cpu_s_best"], 2),
+                "median_of_pairs": round(float(np.median(pairs)), 2), "pairs": [round(x, 2) for x in pairs]}
         out["free_flight"] = res
     if args.only in (None, "contact"):
         pos = initial_grains(args.n_contact, domain_d, args.seed, overlap_free=True)
         res = {"n": args.n_contact, "steps": args.steps_contact}
         res["ours"] = ours_contacts(case, pos, args.u0, args.steps_contact)
+        try:
+            loop = ours_contacts_run_loop(case, pos, args.u0, args.steps_contact)
+        except Exception as exc:  # the run loop's contacts are optional here: say why not
+            loop = None
+            res["ours_run_loop"] = {"error": f"{type(exc).__name__}: {str(exc)[:300]}"}
+        if loop is not None:
+            res["ours_run_loop"] = loop
         if have_of:
             mat = collision_material(par, res["ours"]["substeps_per_step"],
                                      res["ours"]["max_grain_speed_u"] * par["u_tau"])
@@ -632,7 +714,11 @@ def main():
             res[f"openfoam_maxCo{co:g}"] = of
             res[f"ratio_cpu_maxCo{co:g}"] = round(res["ours"]["particle_steps_per_cpu_s"]
                                                   / of["particle_steps_per_cpu_s"], 2)
+            if loop is not None:
+                res[f"ratio_cpu_run_loop_maxCo{co:g}"] = round(loop["particle_steps_per_cpu_s"]
+                                                               / of["particle_steps_per_cpu_s"], 2)
         out["contacts"] = res
+    out["load_end"] = os.getloadavg()
     print(json.dumps(out, indent=1))
     if not args.keep:
         shutil.rmtree(work_root, ignore_errors=True)
