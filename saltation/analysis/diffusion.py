@@ -13,7 +13,10 @@ equal elapsed time, then over several time origins (variance.py explains the pla
 T_J is found from the data: the median duration of the counted jumps in jumps.parquet
 (each grain's first 10 dropped, paper §3.2) or, from tracks alone, the median time between
 successive bed contacts (local minima of the centre height below 1.5 d). Both windows
-can be overridden (``ranges``), as can T_J (``jump_duration``).
+can be overridden (``ranges``), as can T_J (``jump_duration``). The median counts every
+bed impact, short rebounds included (on the virtual bed the duration distribution has a
+peak below 0.5 d/u* besides the saltation hops of 2–5 d/u*), so it is the shorter,
+conservative choice for where free flight ends.
 
 Uncertainty: the bootstrap over grains — grains (or groups of grains: variance.py) are
 resampled with replacement, the curves and the fits recomputed; ``ci_low``/``ci_high``
