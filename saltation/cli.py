@@ -149,8 +149,11 @@ def _typed(over: dict) -> dict:
 def _sweep(args) -> int:
     from .sweep import format_table, run_sweep
 
-    df = run_sweep(args.sweep, out=args.out, scheduler=args.scheduler, workers=args.workers,
-                   threads_per_worker=args.threads_per_worker)
+    try:
+        df = run_sweep(args.sweep, out=args.out, scheduler=args.scheduler, workers=args.workers,
+                       threads_per_worker=args.threads_per_worker)
+    except KeyboardInterrupt:
+        return 130
     print(format_table(df))
     bad = df[df["status"] != "completed"]
     if len(bad):

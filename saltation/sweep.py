@@ -359,6 +359,7 @@ def run_sweep(source, out=None, scheduler: str | None = None, workers: int | Non
     say(f"sweep {stem}: {total} cases, {done} already finished, {len(todo)} to run -> {out}")
     t0 = time.perf_counter()
     failures = {}
+    stopped = None
     if todo:
         from dask.distributed import Client, LocalCluster, as_completed
 
@@ -384,19 +385,25 @@ def run_sweep(source, out=None, scheduler: str | None = None, workers: int | Non
                 fut = client.submit(run_case, c.tables, c.values, c.name, str((out / "cases" / c.name).absolute()),
                                     threads, key=f"saltation-{stem}-{c.name}", pure=False)
                 futures[fut] = c
-            for fut in as_completed(futures):
-                c = futures[fut]
-                done += 1
-                try:
-                    s = fut.result()
-                    j = s["jumps"]
-                    stats = (f"H {j['H_mean']:.2f} d, L {j['L_mean']:.1f} d, U {j['U_mean']:.2f} u*"
-                             if j.get("count") else "no jumps counted")
-                    say(f"[{done}/{total}] {c.name}: {s['status']}, N = {s['n_particles']}, {stats}, "
-                        f"wall {s['timing']['wall_s']:.1f} s")
-                except Exception as err:  # noqa: BLE001 - one failed case must not stop the others
-                    failures[c.name] = f"{type(err).__name__}: {err}"
-                    say(f"[{done}/{total}] {c.name}: FAILED {failures[c.name]}")
+            try:
+                for fut in as_completed(futures):
+                    c = futures[fut]
+                    done += 1
+                    try:
+                        s = fut.result()
+                        j = s["jumps"]
+                        stats = (f"H {j['H_mean']:.2f} d, L {j['L_mean']:.1f} d, U {j['U_mean']:.2f} u*"
+                                 if j.get("count") else "no jumps counted")
+                        say(f"[{done}/{total}] {c.name}: {s['status']}, N = {s['n_particles']}, {stats}, "
+                            f"wall {s['timing']['wall_s']:.1f} s")
+                    except Exception as err:  # noqa: BLE001 - one failed case must not stop the others
+                        failures[c.name] = f"{type(err).__name__}: {err}"
+                        say(f"[{done}/{total}] {c.name}: FAILED {failures[c.name]}")
+            except KeyboardInterrupt as err:
+                # Ctrl-C: the cases in flight stop with the workers (their last periodic
+                # checkpoint stays); what finished is gathered below; run again to go on
+                stopped = err
+                say(f"sweep interrupted with {done}/{total} cases finished; run the same command again to continue")
         finally:
             client.close()
             if cluster is not None:
@@ -407,6 +414,8 @@ def run_sweep(source, out=None, scheduler: str | None = None, workers: int | Non
         df.loc[df["case"] == name, "error"] = why
     df.to_parquet(out / "results.parquet", index=False)
     say(f"sweep wall time {time.perf_counter() - t0:.1f} s; wrote {out / 'results.parquet'}")
+    if stopped is not None:
+        raise stopped
     df.attrs["wall_s"] = time.perf_counter() - t0
     df.attrs["out"] = str(out)
     return df

@@ -135,3 +135,14 @@ def test_cli_sweep_on_a_two_process_local_cluster(tmp_path, capsys):
     assert "[2/2]" in text and "t2.43_s7" in text
     df = pd.read_parquet(out / "results.parquet")
     assert len(df) == 2 and (df["status"] == "completed").all() and (df["threads"] == 1).all()
+
+
+def test_sweep_on_an_existing_scheduler(tmp_path):
+    from dask.distributed import LocalCluster
+
+    path = write(tmp_path, TINY.replace('tau_ratio = [1.79, 2.43]', 'tau_ratio = [2.0]').replace('"run.seed" = [0, 1]', '"run.seed" = [2]'))
+    log: list[str] = []
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=False, dashboard_address=None) as cluster:
+        df = run_sweep(path, out=tmp_path / "remote", scheduler=cluster.scheduler_address, echo=log.append)
+    assert any(line.startswith(f"scheduler {cluster.scheduler_address}: 1 workers") for line in log)
+    assert list(df["case"]) == ["t2_s2"] and df["status"].iloc[0] == "completed"
