@@ -358,18 +358,23 @@ def gamma_vs_paper(df: pd.DataFrame) -> pd.DataFrame:
 
 def cost_vs_paper(df: pd.DataFrame) -> pd.DataFrame:
     """Table 3 side by side: our wall time, and scaled to the paper's 200 s simulated,
-    next to the paper's CPU time at the nearest N (within 25 %)."""
+    next to the paper's CPU time at the nearest N (within 25 %) and at the paper case of
+    the same concentration (the paper's domain holds more grains at a given C)."""
     rows = []
     for _, r in df.sort_values("n_particles").iterrows():
         n = r["n_particles"]
         near = min(ref.N_PARTICLES, key=lambda k: abs(math.log(k / n)))
         match = abs(near / n - 1) <= 0.25
         sim = r["simulated_time_s"]
-        rows.append({"case": r["case"], "n_particles": n, "tau_ratio": r["tau_ratio"], "simulated_s": sim,
+        _, pc, _ = ref.match_case(r["tau_ratio"], r["concentration_pct"])
+        n_at_c = ref.N_PARTICLES[ref.CONCENTRATIONS_PCT.index(pc)] if pc is not None else None
+        rows.append({"case": r["case"], "n_particles": n, "tau_ratio": r["tau_ratio"],
+                     "concentration_pct": r["concentration_pct"], "simulated_s": sim,
                      "wall_s": r["wall_s"], "threads": r["threads"],
                      "wall_s_per_simulated_s": r["wall_s"] / sim if sim else None,
                      "wall_s_scaled_to_200s": r["wall_s"] / sim * ref.SIMULATED_S if sim else None,
                      "paper_N": near if match else None, "paper_cpu_s_200s": ref.CPU_TIME_S[near] if match else None,
+                     "paper_N_same_C": n_at_c, "paper_cpu_s_200s_same_C": ref.CPU_TIME_S[n_at_c] if n_at_c else None,
                      "particle_steps_per_s": r["particle_steps_per_s"],
                      "note": "" if match else f"no paper N within 25 % (nearest {near})"})
     return pd.DataFrame(rows)
