@@ -61,6 +61,8 @@ def test_openfoam_restitution_limits_and_inverse():
 def test_parse_log():
     text = """Time = 0.1
     Current number of parcels       = 7
+    Current mass in system          = 2
+    Linear momentum                 = (0.3 0.4 -1e-3)
    |Linear momentum|                = 0.5
     12 move-collide subCycles
 ExecutionTime = 1.5 s  ClockTime = 2 s
@@ -73,6 +75,7 @@ ExecutionTime = 2.25 s  ClockTime = 3 s
     res = bench.parse_log(text)
     assert res["execution_s"] == [1.5, 2.25] and res["subcycles"] == [12, 14]
     assert res["parcels"] == [7, 7] and res["momentum"] == [0.5, 0.75] and not res["fatal"]
+    assert res["momentum_vector"] == [(0.3, 0.4, -1e-3)] and res["mass"] == [2.0]
     rate = bench.openfoam_rate(res, 7, 1)
     assert rate["timed_steps"] == 1 and rate["particle_steps_per_cpu_s"] == round(7 / 0.75)
 
@@ -124,6 +127,7 @@ def test_tracker_case_runs_and_moves_grains(small_channel, tmp_path, contacts):
     res, _ = bench.run_tracker(run_dir, timeout=120)
     assert len(res["execution_s"]) == steps
     assert res["parcels"] and all(p == n for p in res["parcels"])  # nobody lost or stuck
+    assert len(res["momentum_vector"]) == steps and len(res["mass"]) == steps
     if contacts:
         assert res["subcycles"] and min(res["subcycles"]) >= 2
     # the flow (+x) drags the grains: streamwise momentum grows every step
