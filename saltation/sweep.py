@@ -230,13 +230,32 @@ def case_status(directory: Path) -> str | None:
         return None
 
 
+CASE_FILE = "sweep_case.json"  # the base tables and grid values a case directory was run with
+
+
+def _fingerprint(tables: Mapping, values: Mapping) -> str:
+    return json.dumps({"tables": tables, "values": values}, sort_keys=True, default=str)
+
+
+def is_finished(directory: Path, case: SweepCase) -> bool:
+    """summary.json says "completed" and the directory was run with this very case."""
+    try:
+        ran = (Path(directory) / CASE_FILE).read_text()
+    except FileNotFoundError:
+        return False
+    return case_status(directory) == "completed" and ran == _fingerprint(case.tables, case.values)
+
+
 def run_case(tables: dict, values: dict, name: str, directory: str, threads: int) -> dict:
     """Run (or resume) one sweep case; returns its summary dict. Runs on a Dask worker."""
     from .run import CHECKPOINT, SimulationError, run
 
     directory = Path(directory)
-    if case_status(directory) == "completed":
+    fingerprint = _fingerprint(tables, values)
+    if is_finished(directory, SweepCase(name, values, tables)):
         return json.loads((directory / "summary.json").read_text())
+    directory.mkdir(parents=True, exist_ok=True)
+    (directory / CASE_FILE).write_text(fingerprint)
     overrides = dict(values)
     overrides["run.name"] = name
     overrides["run.threads"] = int(threads)
@@ -354,9 +373,12 @@ def run_sweep(source, out=None, scheduler: str | None = None, workers: int | Non
     (out / "sweep.json").write_text(json.dumps(
         {"source": str(sweep.path) if sweep.path else None, "grid": sweep.grid, "base": sweep.base,
          "cases": {c.name: c.values for c in sweep.cases}}, indent=1, default=str))
-    todo = [c for c in sweep.cases if case_status(out / "cases" / c.name) != "completed"]
+    todo = [c for c in sweep.cases if not is_finished(out / "cases" / c.name, c)]
     total, done = len(sweep.cases), len(sweep.cases) - len(todo)
     say(f"sweep {stem}: {total} cases, {done} already finished, {len(todo)} to run -> {out}")
+    for c in todo:
+        if case_status(out / "cases" / c.name) == "completed":
+            say(f"{c.name}: completed, but with another case definition: running it again")
     t0 = time.perf_counter()
     failures = {}
     stopped = None

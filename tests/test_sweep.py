@@ -125,6 +125,14 @@ def test_sweep_runs_skips_finished_cases_and_resumes_interrupted_ones(tmp_path):
     run_sweep(path, out=out, processes=False, echo=log.append)
     assert "4 already finished, 0 to run" in log[0]
 
+    # the sweep file changed under a finished case: that case is not finished any more
+    path.write_text(TINY.replace("n_particles = 8", "n_particles = 9").replace("tau_ratio = [1.79, 2.43]", "tau_ratio = [1.79]"))
+    log.clear()
+    df3 = run_sweep(path, out=out, processes=False, echo=log.append)
+    assert "0 already finished, 2 to run" in log[0]
+    assert "t1.79_s0: completed, but with another case definition: running it again" in log
+    assert (df3["n_particles"] == 9).all()
+
 
 def test_cli_sweep_on_a_two_process_local_cluster(tmp_path, capsys):
     path = write(tmp_path, TINY.replace('"run.seed" = [0, 1]', '"run.seed" = [7]'))
