@@ -113,6 +113,7 @@ def _written_positions(case_dir):
     return np.array(rows, dtype=float)
 
 
+@pytest.mark.openfoam
 @needs_openfoam
 @pytest.mark.parametrize("contacts", [False, True], ids=["free", "pairCollision"])
 def test_tracker_case_runs_and_moves_grains(small_channel, tmp_path, contacts):
