@@ -392,6 +392,13 @@ class CollisionsConfig(_Table):
                               doc="largest overlap in d at impact_speed (SPEC §5: ≲ 1 %)")
     impact_speed: float = _key(10.0, kind="float", unit="u*", gt=0.0,
                                doc="relative normal speed in u* for the overlap rule")
+    steps_per_contact: int = _key(CONTACT_STEPS, kind="int", ge=10,
+                                  doc="contact sub-steps per (undamped) soft-contact duration "
+                                      "(SPEC §5: >= 20; 10 is the least accepted)")
+    skin: float | None = _key(kind="float", unit="d", gt=0.0, le=5.0,
+                              doc="Verlet neighbour skin in d (soft contacts); absent: twice "
+                                  "the distance a grain at 20 u* covers in one step, x1.2, "
+                                  ">= 0.1 d (stepping.default_skin)")
 
     def _check(self):
         if self.model == "soft" and self.restitution == 0.0:
@@ -729,7 +736,8 @@ class Case:
         """Contact sub-steps per time step so a soft contact spans ≥ 20 of them (1 if not soft)."""
         if self.collisions.model != "soft":
             return 1
-        return max(1, math.ceil(CONTACT_STEPS * self.dt / self.contact_duration - 1e-9))
+        steps = self.collisions.steps_per_contact
+        return max(1, math.ceil(steps * self.dt / self.contact_duration - 1e-9))
 
     # -- domain and number of grains -------------------------------------------------
 

@@ -146,9 +146,11 @@ def _rhs(coef, x, basset, uf, grad, dudt, vort, uf_top, uf_bot, acc, dspin, k):
 
 
 @njit(cache=True, error_model="numpy", _nrt=False)
-def step_particle(f, coef, bed, seed, st, w, hc, p, t, dt):
-    """One RK4 step of particle p from t to t + dt, with bed impacts (module docstring).
-    hc: history.HistoryCoefficients."""
+def free_flight_particle(f, coef, st, w, hc, p, t, dt):
+    """Steps 1-2 of the module docstring for particle p: RK4 from t to t + dt with the
+    fluid forces, then the fluid sample at the new position and the history closure.
+    Leaves the start-of-step state (x, u, ϖ) in ``w.x0[p]``; no bed. hc:
+    history.HistoryCoefficients."""
     re_star = coef[RE_STAR]
     with_lift = coef[ON_LIFT] != 0.0
     with_basset = coef[ON_BASSET] != 0.0
@@ -208,7 +210,15 @@ def step_particle(f, coef, bed, seed, st, w, hc, p, t, dt):
             vel, uf, i_hist, coef[BASSET_PREFACTOR], dt, st.hist_slip[p], st.hist_meta[p],
             st.hist_tail[p], hc.window_weights, hc.tail_weight, hc.tail_decay, hc.tail_c_old, hc.tail_c_new, i_hist,
         )
-    y_old = x0[1]
+
+
+@njit(cache=True, error_model="numpy", _nrt=False)
+def bed_check_particle(st, w, p, t, dt, bed, seed):
+    """Step 3 of the module docstring for particle p after its move from ``w.x0[p]`` to
+    ``st.pos[p]``: virtual-bed impact, grazing contact, highest point of the jump."""
+    pos = st.pos[p]
+    vel = st.vel[p]
+    y_old = w.x0[p, 1]
     y_new = pos[1]
     if y_new < RADIUS:
         if vel[1] < 0.0 and y_old >= RADIUS:
@@ -221,6 +231,15 @@ def step_particle(f, coef, bed, seed, st, w, hc, p, t, dt):
                 _bed_impact(st, w, p, t, dt, RADIUS, RADIUS, bed, seed)
     if pos[1] > st.jump_ymax[p]:
         st.jump_ymax[p] = pos[1]
+
+
+@njit(cache=True, error_model="numpy", _nrt=False)
+def step_particle(f, coef, bed, seed, st, w, hc, p, t, dt):
+    """One RK4 step of particle p from t to t + dt, with bed impacts (module docstring):
+    free flight, then the bed check. hc: history.HistoryCoefficients."""
+    free_flight_particle(f, coef, st, w, hc, p, t, dt)
+    if st.status[p] == OK:
+        bed_check_particle(st, w, p, t, dt, bed, seed)
 
 
 @njit(cache=True, error_model="numpy", _nrt=False)

@@ -24,8 +24,9 @@ from . import history
 from .bed import coefficient_set
 from .config import Case, dump_toml, load_case, resolve_domain
 from .forces import make_coefficients
-from .initial import initial_conditions
-from .integrator import NOT_FINITE, advance, make_state, make_workspace
+from .initial import initial_conditions, initial_conditions_apart
+from .integrator import NOT_FINITE, make_state, make_workspace
+from .stepping import Stepper
 from .writers import JumpWriter, ParaViewWriter, TrackWriter, write_json
 
 VARIANCE_FILE = "variance.parquet"  # displacement variances for the diffusion exponents
@@ -159,6 +160,10 @@ class Simulation:
         self.n_window = f.basset_window
         self.hist_coef = history.make_history_coefficients(self.dt, self.n_window)
         self.top_d = float(flow.y[-1]) / self.re_star
+        # contacts and bed (stepping.py: free flight → grain contacts → bed each step)
+        self.stepper = Stepper(case, self.n, self.domain_d, self.top_d, self.coef, self.bed, case.run.seed,
+                               self.hist_coef, self.dt)
+        self._stepper_arrays = None
 
     # ------------------------------------------------------------------ helpers
     SERIAL_BELOW = 2000  # grains: below this a step is too short to share between threads
@@ -173,7 +178,8 @@ class Simulation:
 
     def _initial_state(self):
         c = self.case
-        pos, vel, spin = initial_conditions(self.n, self.domain_d, c.run.seed, c.run.release_height)
+        start = initial_conditions if c.collisions.model == "off" else initial_conditions_apart
+        pos, vel, spin = start(self.n, self.domain_d, c.run.seed, c.run.release_height)
         return make_state(pos, vel, spin, 0.0, self.n_window)
 
     def _collect_jumps(self, st, writer: JumpWriter, rows: list):
@@ -224,6 +230,9 @@ class Simulation:
             st, ws, rows = ckpt[1], ckpt[2], ckpt[3]
         else:
             st, ws, rows = self._initial_state(), make_workspace(self.n), []
+        self.stepper.start(st.pos)
+        if ckpt and self._stepper_arrays:
+            self.stepper.load_state_arrays(self._stepper_arrays, st.pos)
         f = self.flow.arrays
         d, ts = c.particle.diameter, c.time_scale
         parts = self.out / PARTS
@@ -238,7 +247,7 @@ class Simulation:
         var = self._variance(resume_step=meta["step"] if ckpt else None)  # diffusion statistics (SPEC §6)
         wall0 = time.perf_counter() - meta.get("wall_s", 0.0)
         t_compile = time.perf_counter()
-        advance(f, self.coef, self.bed, c.run.seed, st, ws, self.hist_coef, 0.0, self.dt, 0, self.top_d)
+        self.stepper.advance(f, st, ws, 0.0, 0, 0)  # compiles (zero steps)
         compile_s = time.perf_counter() - t_compile + meta.get("compile_s", 0.0)
         kernel_s = meta.get("kernel_s", 0.0)
         status = "completed"
@@ -272,7 +281,7 @@ class Simulation:
                           + [s for s in [var.next_step(step) if var is not None else None] if s is not None])
                 t0 = time.perf_counter()
                 want = nxt - step
-                done = advance(f, self.coef, self.bed, c.run.seed, st, ws, self.hist_coef, step * self.dt, self.dt, want, self.top_d)
+                done = self.stepper.advance(f, st, ws, step * self.dt, want, step)
                 kernel_s += time.perf_counter() - t0
                 self._collect_jumps(st, jw, rows)
                 if np.any(st.status == NOT_FINITE):
@@ -321,6 +330,7 @@ class Simulation:
             elif status == "interrupted" and (self.out / CHECKPOINT).exists():
                 summary["checkpoint"] = {"file": CHECKPOINT, "step": self._checkpoint_step}
             write_json(self.out / "summary.json", summary)
+            self._write_particles(st)
         result = RunResult(self.out, summary)
         if status == "interrupted":
             raise RunInterrupted(result, int(self._signal))
@@ -373,6 +383,7 @@ class Simulation:
         arrays = {f"state.{k}": v for k, v in st._asdict().items()}
         arrays.update({f"fluid.{k}": getattr(ws, k) for k in FLUID_FIELDS})
         arrays["jump_rows"] = np.concatenate(rows) if rows else np.zeros((0, 5))
+        arrays.update({f"stepper.{k}": v for k, v in self.stepper.state_arrays().items()})
         meta = {
             "format": 1,
             "step": int(step),
@@ -420,7 +431,21 @@ class Simulation:
         for k in FLUID_FIELDS:
             getattr(ws, k)[...] = data[f"fluid.{k}"]
         rows = [data["jump_rows"]] if len(data["jump_rows"]) else []
+        self._stepper_arrays = {k[len("stepper."):]: v for k, v in data.items() if k.startswith("stepper.")}
         return meta, st, ws, rows
+
+    def _write_particles(self, st):
+        """particles.parquet: one row per grain — grain–grain collisions, bed impacts,
+        completed jumps, largest contact overlap (d)."""
+        table = pd.DataFrame({
+            "particle": np.arange(self.n, dtype=np.int32),
+            "collisions": self.stepper.per_particle_collisions(),
+            "bed_impacts": st.impacts.copy(),
+            "jumps": st.jump_count.copy(),
+            "max_overlap": (self.stepper.cl.max_overlap.copy() if len(self.stepper.cl.max_overlap) == self.n
+                            else np.zeros(self.n)),
+        })
+        table.to_parquet(self.out / "particles.parquet", index=False)
 
     # ------------------------------------------------------------------ summary
     def _summary(self, st, rows, steps, wall, compile_s, kernel_s, threads, status):
@@ -465,20 +490,13 @@ class Simulation:
                 "H_mean": h, "H_std": hs, "L_mean": l, "L_std": ls, "U_mean": u, "U_std": us,
                 "units": "H, L in d; U in u*",
             },
-            "collisions": {
-                "particle_particle": 0,
-                "bed": bed_impacts,
-                "per_particle": bed_impacts / self.n,
-                "bed_per_particle_per_unit_time": bed_impacts / self.n / duration_p if duration_p else None,
-            },
+            "collisions": self.stepper.collisions_summary(st, duration_p),
             "steps_above_flow_top": int(st.above_top.sum()),
             "timing": {
                 "wall_s": wall,
                 "compile_s": compile_s,
                 "kernel_s": kernel_s,
-                "free_flight_s": kernel_s,
-                "bed_s": None,
-                "particle_collisions_s": 0.0,
+                **self.stepper.timing(),
                 "threads": threads,
             },
             "particle_steps_per_s": particle_steps / kernel_s if kernel_s > 0 else None,

@@ -1,0 +1,285 @@
+"""Packed bed: one hexagonal layer of fixed spheres (SPEC §4, option 2).
+
+Geometry (particle units, d = 1)
+--------------------------------
+Bed spheres of diameter d sit with their centres at ``y = −1/2``, so their tops are at
+``y = 0``, the bed top of the virtual bed (a grain's centre height ``y`` is measured from
+it everywhere in the code). In the (x, z) plane they form a hexagonal (close-packed)
+layer, periodic in x and z over the particle domain ``Lx × Lz``: ``nx = round(Lx)``
+spheres per row at spacing ``sx = Lx/nx``, ``nr = 2·round(Lz/√3)`` rows at spacing
+``sz = Lz/nr`` (an even number, so the half-spacing shift of every other row is
+periodic). Spacings differ from the touching values 1 and √3/2 by the rounding only
+(< 1/(2 Lx) and < 1/(√3 Lz) relative); slightly stretched rows leave gaps far too small
+for a grain to pass (a grain resting in a hollow between three touching bed spheres has
+its centre at ``y = −1/2 + √(2/3) = 0.316``).
+
+Contact search: the bed sphere centres are sorted once into a cells.py grid (cells of at
+least one diameter, x and z periodic, one layer in y) by the same counting sort as the
+grains; a grain whose centre is below ``y = 1/2`` (only then can it reach a bed sphere)
+looks at the 3 × 3 cells around it and measures separations by the minimum image.
+
+Impact (hard sphere with the real normal)
+-----------------------------------------
+After a grain's move in a step (free flight, then grain–grain contacts) from x₀ to x₁
+with end velocity u: if x₁ lies within one diameter of some bed sphere centres c, the
+time of entry is found by running the move back along u (the same linear back-tracking
+as the virtual bed): τ = the positive root of |x₁ − τu − c| = 1, the largest over the
+spheres overlapped (the first one hit). At the contact point x_h = x₁ − τu the normal is
+n = (x_h − c)/|x_h − c|; SPEC §4's impulse (``bed.rebound``, restitution e, Coulomb
+friction f, spin included) gives the new velocity and spin, and the grain moves on for
+the remaining τ. That is repeated (at most ``MAX_BOUNCES`` times per step) for a second
+sphere hit within τ — a grain deflected off the lee face of one sphere strikes the next.
+Finally any residual overlap (a grain that started the step inside a sphere's reach, a
+resting grain pressed down by its weight) is removed by moving the grain radially out of
+each overlapped sphere in turn (a few Gauss–Seidel sweeps); that never changes the
+velocity, and grains never end a step inside a bed sphere.
+
+Jumps and resting grains. A grain touching the bed in consecutive steps is rolling or
+resting, not saltating: only an impact after at least one step without bed contact
+closes a jump (SPEC §6: a jump runs from one bed impact to the next); while the contact
+lasts, the start of the next jump is moved along with the grain. Every impulse counts as
+a bed collision. The Basset history restarts at each impulse, as on the virtual bed
+(history.py explains why).
+"""
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+from numba import njit
+
+from .bed import NO_IMPACT, rebound
+from .cells import CellGrid, allocate_cells, build_cells, make_grid, min_image
+from .history import META_COUNT
+
+RADIUS = 0.5  # grain radius (d)
+BED_CENTRE_Y = -0.5  # bed sphere centres: their tops at y = 0
+MAX_BOUNCES = 4  # impulses per grain and step at most
+PUSH_SWEEPS = 8  # Gauss–Seidel sweeps that remove residual overlaps
+
+__all__ = ["PackedBed", "make_packed_bed", "packed_bed_check_particle", "bed_overlap", "BED_CENTRE_Y"]
+
+
+class PackedBed(NamedTuple):
+    # flat (no nested CellGrid): Numba's parallel loops cannot take nested named tuples
+    centres: np.ndarray  # (M, 3) bed sphere centres (d), y = BED_CENTRE_Y
+    box: np.ndarray  # (3,) Lx, 1, Lz of the cells.py grid (periodic in x and z)
+    ncell: np.ndarray  # (3,) int64 cells per axis
+    size: np.ndarray  # (3,) cell edges (d)
+    cell_start: np.ndarray  # (C,) int64
+    cell_count: np.ndarray  # (C,) int64
+    order: np.ndarray  # (M,) int64 bed sphere ids sorted by cell
+    spacing: np.ndarray  # (2,) sx, sz (d)
+
+
+def hexagonal_layer(lx: float, lz: float) -> tuple[np.ndarray, float, float]:
+    """Centres (M, 3) of a periodic hexagonal layer filling lx × lz (d), and (sx, sz)."""
+    nx = max(1, int(round(lx)))
+    nr = 2 * max(1, int(round(lz / math.sqrt(3.0))))
+    sx = lx / nx
+    sz = lz / nr
+    ix, ir = np.meshgrid(np.arange(nx), np.arange(nr), indexing="ij")
+    x = (ix + 0.5 * (ir % 2)) * sx
+    z = ir * sz
+    centres = np.column_stack([x.ravel(), np.full(x.size, BED_CENTRE_Y), z.ravel()])
+    return centres, sx, sz
+
+
+def make_packed_bed(lx: float, lz: float) -> PackedBed:
+    """The bed layer for a particle domain lx × lz (d), sorted into cells of ≥ 1 d.
+
+    Raises ValueError for a domain under 3 d in x or z (SPEC §9 keeps domains ≥ 3 d)."""
+    if not (lx >= 3.0 and lz >= 3.0):
+        raise ValueError(f"packed bed needs a domain of at least 3 d in x and z, got {lx!r} × {lz!r} d")
+    centres, sx, sz = hexagonal_layer(lx, lz)
+    grid = make_grid((lx, 1.0, lz), 1.0, (True, False, True))
+    cell_of, cell_start, cell_count, order = allocate_cells(len(centres), grid)
+    build_cells(centres, grid, cell_of, cell_start, cell_count, order)
+    return PackedBed(centres, grid.box, grid.n, grid.size, cell_start, cell_count, order, np.array([sx, sz]))
+
+
+@njit(cache=True, _nrt=False)
+def _nearest_entry(pb, x, y, z, u, v, w, limit):
+    """The overlapped bed sphere the grain at (x, y, z) moving with (u, v, w) entered
+    first within the last ``limit`` time: (sphere id or −1, τ ≤ limit, offset from the
+    centre at the grain's position). τ is the positive root of |a − τ u| = 1."""
+    lx, lz = pb.box[0], pb.box[2]
+    nx, nz = pb.ncell[0], pb.ncell[2]
+    hx, hz = pb.size[0], pb.size[2]
+    sx = x - lx * math.floor(x / lx)
+    sz = z - lz * math.floor(z / lz)
+    ix = min(int(sx / hx), nx - 1)
+    iz = min(int(sz / hz), nz - 1)
+    best = -1
+    best_tau = -1.0
+    v2 = u * u + v * v + w * w
+    for a in range(-1, 2):
+        cx = (ix + a) % nx
+        for b in range(-1, 2):
+            cz = (iz + b) % nz
+            c = cx * nz + cz  # one layer in y: (cx·1 + 0)·nz + cz
+            for q in range(pb.cell_start[c], pb.cell_start[c] + pb.cell_count[c]):
+                k = pb.order[q]
+                ax = min_image(x - pb.centres[k, 0], lx, 1)
+                ay = y - pb.centres[k, 1]
+                az = min_image(z - pb.centres[k, 2], lz, 1)
+                a2 = ax * ax + ay * ay + az * az
+                if a2 >= 1.0:
+                    continue
+                if v2 > 0.0:
+                    av = ax * u + ay * v + az * w
+                    tau = (av + math.sqrt(max(av * av - v2 * (a2 - 1.0), 0.0))) / v2
+                else:
+                    tau = limit
+                tau = min(max(tau, 0.0), limit)
+                if tau > best_tau:
+                    best_tau = tau
+                    best = k
+    return best, best_tau
+
+
+@njit(cache=True, _nrt=False)
+def bed_overlap(pb, x, y, z):
+    """Largest overlap (d) of a grain at (x, y, z) with any bed sphere (0 if none)."""
+    lx, lz = pb.box[0], pb.box[2]
+    worst = 0.0
+    nx, nz = pb.ncell[0], pb.ncell[2]
+    sx = x - lx * math.floor(x / lx)
+    sz = z - lz * math.floor(z / lz)
+    ix = min(int(sx / pb.size[0]), nx - 1)
+    iz = min(int(sz / pb.size[2]), nz - 1)
+    for a in range(-1, 2):
+        for b in range(-1, 2):
+            c = ((ix + a) % nx) * nz + (iz + b) % nz
+            for q in range(pb.cell_start[c], pb.cell_start[c] + pb.cell_count[c]):
+                k = pb.order[q]
+                ax = min_image(x - pb.centres[k, 0], lx, 1)
+                ay = y - pb.centres[k, 1]
+                az = min_image(z - pb.centres[k, 2], lz, 1)
+                r = math.sqrt(ax * ax + ay * ay + az * az)
+                if 1.0 - r > worst:
+                    worst = 1.0 - r
+    return worst
+
+
+@njit(cache=True, _nrt=False)
+def _push_out(pb, pos):
+    """Move the grain radially out of every bed sphere it overlaps (Gauss–Seidel);
+    returns True when it overlapped any."""
+    lx, lz = pb.box[0], pb.box[2]
+    nx, nz = pb.ncell[0], pb.ncell[2]
+    touched = False
+    for sweep in range(PUSH_SWEEPS):
+        moved = False
+        sx = pos[0] - lx * math.floor(pos[0] / lx)
+        sz = pos[2] - lz * math.floor(pos[2] / lz)
+        ix = min(int(sx / pb.size[0]), nx - 1)
+        iz = min(int(sz / pb.size[2]), nz - 1)
+        for a in range(-1, 2):
+            for b in range(-1, 2):
+                c = ((ix + a) % nx) * nz + (iz + b) % nz
+                for q in range(pb.cell_start[c], pb.cell_start[c] + pb.cell_count[c]):
+                    k = pb.order[q]
+                    ax = min_image(pos[0] - pb.centres[k, 0], lx, 1)
+                    ay = pos[1] - pb.centres[k, 1]
+                    az = min_image(pos[2] - pb.centres[k, 2], lz, 1)
+                    r2 = ax * ax + ay * ay + az * az
+                    if r2 >= 1.0:
+                        continue
+                    r = math.sqrt(r2)
+                    if r > 0.0:
+                        s = (1.0 - r) / r * (1.0 + 1e-12)
+                        pos[0] += s * ax
+                        pos[1] += s * ay
+                        pos[2] += s * az
+                    else:
+                        pos[1] = pb.centres[k, 1] + 1.0
+                    moved = True
+                    touched = True
+        if not moved:
+            break
+    return touched
+
+
+@njit(cache=True, error_model="numpy", _nrt=False)
+def packed_bed_check_particle(st, w, p, t, dt, step, coef_bed, pb, last_contact):
+    """Impacts of grain p on the packed bed after its move in step ``step`` (t → t + dt);
+    module docstring. coef_bed = (e, f, ...). last_contact (N,) int64: the last step in
+    which the grain touched the bed. Returns the number of impulses applied."""
+    pos = st.pos[p]
+    vel = st.vel[p]
+    spin = st.spin[p]
+    if pos[1] >= RADIUS:  # centres of bed spheres at −1/2: out of reach
+        if pos[1] > st.jump_ymax[p]:
+            st.jump_ymax[p] = pos[1]
+        return 0
+    e = coef_bed[0]
+    f = coef_bed[1]
+    n = w.normal[p]
+    remaining = dt
+    hits = 0
+    for it in range(MAX_BOUNCES):
+        k, tau = _nearest_entry(pb, pos[0], pos[1], pos[2], vel[0], vel[1], vel[2], remaining)
+        if k < 0:
+            break
+        # contact point: back along the end-of-step velocity (linear, as on the virtual bed)
+        xh = pos[0] - tau * vel[0]
+        yh = pos[1] - tau * vel[1]
+        zh = pos[2] - tau * vel[2]
+        ax = min_image(xh - pb.centres[k, 0], pb.box[0], 1)
+        ay = yh - pb.centres[k, 1]
+        az = min_image(zh - pb.centres[k, 2], pb.box[2], 1)
+        r = math.sqrt(ax * ax + ay * ay + az * az)
+        if r == 0.0:
+            ax, ay, az, r = 0.0, 1.0, 0.0, 1.0
+        n[0] = ax / r
+        n[1] = ay / r
+        n[2] = az / r
+        if r < 1.0:  # entered before the step began (clipped τ): onto the surface, radially
+            s = 1.0 / r - 1.0
+            xh += ax * s
+            yh += ay * s
+            zh += az * s
+        code = rebound(vel, spin, n, e, f, RADIUS)
+        if code == NO_IMPACT:
+            # touching but separating: nothing to do here (the push-out handles overlap)
+            pos[0] = xh + tau * vel[0]
+            pos[1] = yh + tau * vel[1]
+            pos[2] = zh + tau * vel[2]
+            break
+        hits += 1
+        st.impacts[p] += 1
+        t_hit = t + dt - tau
+        if hits == 1:
+            if last_contact[p] < step - 1:
+                # airborne since an earlier step: a jump ends here (SPEC §6)
+                j = st.jump_buf_n[p]
+                if j < st.jump_buf.shape[1]:
+                    st.jump_buf[p, j, 0] = st.jump_t0[p]
+                    st.jump_buf[p, j, 1] = xh - st.jump_x0[p]
+                    st.jump_buf[p, j, 2] = st.jump_ymax[p] - RADIUS
+                    st.jump_buf[p, j, 3] = t_hit - st.jump_t0[p]
+                    st.jump_buf_n[p] = j + 1
+                st.jump_count[p] += 1
+            st.jump_t0[p] = t_hit
+            st.jump_x0[p] = xh
+        st.hist_meta[p, META_COUNT] = 0  # the Basset history restarts (history.py)
+        pos[0] = xh + tau * vel[0]
+        pos[1] = yh + tau * vel[1]
+        pos[2] = zh + tau * vel[2]
+        remaining = tau
+        if remaining <= 0.0:
+            break
+    touched = _push_out(pb, pos)
+    if hits > 0 or touched:
+        last_contact[p] = step
+        st.fresh[p] = 0  # moved: the fluid must be sampled again
+        if hits == 0:
+            # resting or rolling contact without an impulse: the next jump starts here
+            st.jump_t0[p] = t + dt
+            st.jump_x0[p] = pos[0]
+        st.jump_ymax[p] = pos[1]
+    elif pos[1] > st.jump_ymax[p]:
+        st.jump_ymax[p] = pos[1]
+    return hits

@@ -1,0 +1,272 @@
+"""The hydrodynamic step as an operator split, with its cost accounting (SPEC §5, §6).
+
+Each step of Δt: (1) free flight of every grain (RK4 with the fluid forces, history
+closure; integrator.free_flight_particle), (2) grain–grain contacts (collide.py: soft
+spheres sub-stepped along the free-flight paths, or binary hard-sphere impulses), (3) the
+bed (virtual bed: integrator.bed_check_particle; packed bed: packed_bed.py). The order is
+fixed; collide.py explains the split. Every phase is one parallel pass over the grains,
+and the wall time of each is measured around it (``time.perf_counter`` through Numba's
+object mode, ~0.6 µs per reading, four readings per step) and summed into
+``timers = [free_flight_s, particle_collisions_s, bed_s]``. "Bed" is therefore the
+whole bed pass (contact detection for every grain plus the rebounds), "particle
+collisions" the whole contact phase (neighbour-list upkeep, engagement test,
+sub-steps), "free flight" the RK4 pass.
+
+:class:`Stepper` holds what the phases need besides the grain state (contact list,
+contact-phase work arrays, packed bed, timers) and runs chunks of steps for run.py.
+:meth:`Stepper.state_arrays` / :meth:`Stepper.load_state_arrays` give the arrays a
+checkpoint must keep to continue bit for bit (contact history, counters, bed contacts).
+"""
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+from numba import njit, objmode, prange
+
+from .collide import hard_contact_phase, make_bed_context, make_contact_phase, soft_contact_phase
+from .contacts import contact_model_from_case, make_contact_list
+from .integrator import OK, NOT_FINITE, bed_check_particle, free_flight_particle
+from .packed_bed import make_packed_bed, packed_bed_check_particle
+
+CONTACTS_OFF, CONTACTS_SOFT, CONTACTS_HARD = 0, 1, 2
+BED_VIRTUAL, BED_PACKED = 0, 1
+SKIN_SPEED = 20.0  # u*: the default skin covers a grain at this speed over one step, ×1.2
+LIST_HEIGHT = (4.0, 60.0)  # d: bounds of the contact grid's height (grains above share its top layer)
+
+__all__ = ["Stepper", "advance_split", "default_skin"]
+
+
+@njit(cache=True)
+def _clock():
+    with objmode(t="float64"):
+        t = time.perf_counter()
+    return t
+
+
+@njit(cache=True, parallel=True)
+def _free_flight(f, coef, st, w, hc, t, dt):
+    for p in prange(st.pos.shape[0]):
+        if st.status[p] == OK:
+            free_flight_particle(f, coef, st, w, hc, p, t, dt)
+
+
+@njit(cache=True, parallel=True)
+def _bed_pass(st, w, t, dt, step, bed, seed, bed_model, pb, last_contact, top, skip):
+    """The bed for every grain not in ``skip`` (grains whose bed contact the soft contact
+    phase resolved; ``skip`` empty: none)."""
+    above_top, pos, status = st.above_top, st.pos, st.status  # writes in a prange body: not through the tuple
+    use_skip = skip.shape[0] == pos.shape[0]
+    for p in prange(pos.shape[0]):
+        if status[p] != OK:
+            continue
+        if use_skip and skip[p] != 0:
+            if pos[p, 1] > top:
+                above_top[p] += 1
+            continue
+        if bed_model == BED_PACKED:
+            packed_bed_check_particle(st, w, p, t, dt, step, bed, pb, last_contact)
+        else:
+            bed_check_particle(st, w, p, t, dt, bed, seed)
+        if pos[p, 1] > top:
+            above_top[p] += 1
+
+
+@njit(cache=True)
+def advance_split(f, coef, bed, seed, st, w, hc, t0, dt, n_steps, top, step0, contacts_mode, model, cl,
+                  ph, bc, n_sub, restitution, friction, scratch, bed_model, pb, last_contact, timers):
+    """Advance all grains n_steps from t0 (global step index step0): free flight →
+    contacts → bed each step (module docstring). Stops early, like integrator.advance,
+    when a grain is not finite or a jump buffer is full. Returns (steps done, the
+    ContactList to keep)."""
+    n = st.pos.shape[0]
+    cap = st.jump_buf.shape[1]
+    for s in range(n_steps):
+        t = t0 + s * dt
+        c0 = _clock()
+        _free_flight(f, coef, st, w, hc, t, dt)
+        c1 = _clock()
+        bad = False
+        for p in range(n):
+            if st.status[p] != OK:
+                bad = True
+                break
+        if not bad:
+            if contacts_mode == CONTACTS_SOFT:
+                cl = soft_contact_phase(st, w.x0, model, cl, ph, bc, t, step0 + s, dt, n_sub)
+            elif contacts_mode == CONTACTS_HARD:
+                hard_contact_phase(st, cl, restitution, friction, scratch)
+        c2 = _clock()
+        if not bad:
+            skip = ph.active if contacts_mode == CONTACTS_SOFT else ph.active[:0]
+            _bed_pass(st, w, t, dt, step0 + s, bed, seed, bed_model, pb, last_contact, top, skip)
+        c3 = _clock()
+        timers[0] += c1 - c0
+        timers[1] += c2 - c1
+        timers[2] += c3 - c2
+        stop = bad
+        for p in range(n):
+            if st.status[p] != OK or st.jump_buf_n[p] >= cap:
+                stop = True
+                break
+        if stop:
+            return s + 1, cl
+    return n_steps, cl
+
+
+def default_skin(dt_particle: float) -> float:
+    """Verlet skin (d): twice the distance a grain at SKIN_SPEED u* covers in a step, ×1.2,
+    at least 0.1 d (collide.py: the list must hold for a whole step)."""
+    return max(0.1, 2.0 * 1.2 * SKIN_SPEED * dt_particle)
+
+
+class Stepper:
+    """Contact and bed state of a run, and the chunked stepping (run.py calls
+    ``advance``). Particle units throughout (d, u*, d/u*)."""
+
+    def __init__(self, case, n: int, domain_d, top_d: float, coef, bed, seed: int, hist_coef, dt: float):
+        self.case = case
+        self.n = n
+        self.coef, self.bed, self.seed, self.hist_coef, self.dt = coef, bed, int(seed), hist_coef, float(dt)
+        self.top_d = float(top_d)
+        lx, lz = domain_d
+        cc = case.collisions
+        self.contacts_mode = {"off": CONTACTS_OFF, "soft": CONTACTS_SOFT, "hard": CONTACTS_HARD}[cc.model]
+        self.bed_model = BED_PACKED if case.bed.model == "packed" else BED_VIRTUAL
+        self.model = contact_model_from_case(case)
+        self.n_sub = case.contact_substeps if self.contacts_mode == CONTACTS_SOFT else 1
+        skin = getattr(cc, "skin", None)
+        self.skin = float(skin) if skin is not None else default_skin(dt)
+        height = min(max(self.top_d, LIST_HEIGHT[0]), LIST_HEIGHT[1])
+        self.box = (float(lx), height, float(lz))
+        n_list = n if self.contacts_mode != CONTACTS_OFF else 0
+        skin_used = self.skin if self.contacts_mode == CONTACTS_SOFT else 0.0
+        cut = 1.0 + skin_used
+        if self.contacts_mode != CONTACTS_OFF and min(lx, lz) < 2.0 * cut:
+            raise ValueError(f"the particle domain {lx:.4g} × {lz:.4g} d is too small for contacts "
+                             f"with a cutoff of {cut:.4g} d (needs ≥ {2 * cut:.4g} d in x and z)")
+        self.cl = make_contact_list(np.zeros((n_list, 3)), self.box, (True, False, True), 1.0, skin_used)
+        self.ph = make_contact_phase(n_list)
+        self.scratch = np.zeros(n_list, np.int64)
+        self.pb = make_packed_bed(lx, lz) if self.bed_model == BED_PACKED else make_packed_bed(3.0, 3.0)
+        self.last_contact = np.full(n, -2, np.int64)
+        m = self.model
+        self.bc = make_bed_context(n_list if self.contacts_mode == CONTACTS_SOFT else 0, self.bed_model == BED_PACKED,
+                                   self.pb, float(bed[0]), float(bed[1]), float(bed[2]), m.kn, m.kt, self.seed,
+                                   self.last_contact if self.contacts_mode == CONTACTS_SOFT else self.last_contact[:0])
+        self.timers = np.zeros(3)
+        self.pp_collisions_hard = 0
+
+    def start(self, pos):
+        """Build the contact list on the initial positions (N, 3) (particle units)."""
+        if self.contacts_mode != CONTACTS_OFF:
+            counters = (self.cl.collisions.copy(), self.cl.max_overlap.copy())
+            self.cl = make_contact_list(pos, self.box, (True, False, True), 1.0,
+                                        self.skin if self.contacts_mode == CONTACTS_SOFT else 0.0)
+            if len(counters[0]) == len(pos):
+                self.cl.collisions[:] = counters[0]
+                self.cl.max_overlap[:] = counters[1]
+
+    def advance(self, f, st, ws, t0: float, n_steps: int, step0: int) -> int:
+        """n_steps steps from t0 (global step index step0); returns the steps done."""
+        e, fr = self.case.collisions.restitution, self.case.collisions.friction
+        done, self.cl = advance_split(
+            f, self.coef, self.bed, self.seed, st, ws, self.hist_coef, float(t0), self.dt, int(n_steps),
+            self.top_d, int(step0), self.contacts_mode, self.model, self.cl, self.ph, self.bc, int(self.n_sub),
+            float(e), float(fr), self.scratch, self.bed_model, self.pb, self.last_contact, self.timers)
+        return int(done)
+
+    # ---------------------------------------------------------------- statistics
+    def per_particle_collisions(self) -> np.ndarray:
+        """Grain–grain collisions of each grain (N,) int64."""
+        if self.contacts_mode == CONTACTS_OFF:
+            return np.zeros(self.n, np.int64)
+        return self.cl.collisions.copy()
+
+    def collisions_summary(self, st, duration_p: float) -> dict:
+        """The ``collisions`` block of summary.json (SPEC §9), particle units."""
+        n = self.n
+        per = self.per_particle_collisions()
+        pairs = int(per.sum()) // 2
+        bed_impacts = int(st.impacts.sum())
+        out = {
+            "model": self.case.collisions.model,
+            "bed_model": self.case.bed.model,
+            "particle_particle": pairs,
+            "bed": bed_impacts,
+            "per_particle": 2.0 * pairs / n,
+            "per_particle_per_unit_time": 2.0 * pairs / n / duration_p if duration_p else None,
+            "bed_per_particle": bed_impacts / n,
+            "bed_per_particle_per_unit_time": bed_impacts / n / duration_p if duration_p else None,
+            "units": "per_particle: grain–grain collisions per grain (each collision involves two "
+                     "grains); unit time = d/u*",
+        }
+        if self.contacts_mode == CONTACTS_SOFT:
+            ph, cl = self.ph, self.cl
+            sub = int(ph.contact_substeps.sum())
+            started = int(per.sum())
+            h = self.dt / self.n_sub
+            out["soft"] = {
+                "stiffness_N_m": self.case.collision_stiffness,
+                "kn_particle_units": self.model.kn,
+                "contact_duration_particle": math.pi / math.sqrt(self.model.kn / (0.5 * self.model.mass)
+                                                                 - 0.25 * self.model.gamma_n ** 2),
+                "substeps_per_step": self.n_sub,
+                "substep_particle": h,
+                "skin_d": self.skin,
+            }
+            out["overlap"] = {
+                "max_over_d": float(cl.max_overlap.max(initial=0.0)),
+                "mean_over_d": float(ph.overlap_sum.sum() / sub) if sub else None,
+                "mean_is": "time-mean overlap over the sub-steps in contact",
+                "contact_duration_substeps_mean": sub / started if started else None,
+                "contact_duration_particle_mean": h * sub / started if started else None,
+            }
+            out["contact_phase"] = {
+                "list_rebuilds_in_steps": int(ph.counters[0]),
+                "list_builds_total": int(cl.builds[0]),
+                "overruns": int(ph.counters[1]),
+                "wakes": int(ph.counters[2]),
+                "substepped_grain_steps": int(ph.counters[3]),
+            }
+        return out
+
+    def timing(self) -> dict:
+        ff, pc, bd = (float(x) for x in self.timers)
+        return {"free_flight_s": ff, "particle_collisions_s": pc, "bed_s": bd,
+                "split_is": "wall time of each phase's pass over the grains, summed over steps "
+                            "(stepping.py)"}
+
+    # ---------------------------------------------------------------- checkpoints
+    def state_arrays(self) -> dict:
+        """Arrays that a checkpoint must keep (with the GrainState) to resume bit for bit."""
+        cl, ph = self.cl, self.ph
+        out = {"last_contact": self.last_contact, "timers": self.timers}
+        if self.contacts_mode != CONTACTS_OFF:
+            out.update({"cl_" + k: getattr(cl, k) for k in
+                        ("ref_pos", "nbr", "nbr_count", "shear", "touch", "n_touch", "collisions",
+                         "max_overlap", "builds")})
+            out.update({"ph_" + k: getattr(ph, k) for k in ("contact_substeps", "overlap_sum", "counters")})
+        return out
+
+    def load_state_arrays(self, arrays: dict, pos) -> None:
+        """Restore ``state_arrays()`` (after ``start``); cells are rebuilt from ref_pos."""
+        from .cells import build_cells
+
+        self.last_contact[:] = arrays["last_contact"]
+        self.timers[:] = arrays["timers"]
+        if self.contacts_mode == CONTACTS_OFF:
+            return
+        cl = self.cl
+        k = arrays["cl_nbr"].shape[1]
+        if cl.nbr.shape[1] != k:
+            cl = cl._replace(nbr=np.zeros((self.n, k), np.int32), shear=np.zeros((self.n, k, 3)),
+                             touch=np.zeros((self.n, k), np.uint8), nbr2=np.zeros((self.n, k), np.int32),
+                             shear2=np.zeros((self.n, k, 3)), touch2=np.zeros((self.n, k), np.uint8))
+        for name in ("ref_pos", "nbr", "nbr_count", "shear", "touch", "n_touch", "collisions", "max_overlap", "builds"):
+            getattr(cl, name)[...] = arrays["cl_" + name]
+        build_cells(cl.ref_pos, cl.grid, cl.cell_of, cl.cell_start, cl.cell_count, cl.order)
+        self.cl = cl
+        for name in ("contact_substeps", "overlap_sum", "counters"):
+            getattr(self.ph, name)[...] = arrays["ph_" + name]
