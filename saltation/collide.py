@@ -72,8 +72,8 @@ import numpy as np
 from numba import njit, prange
 
 from .bed import virtual_bed_normal
-from .cells import min_image
-from .contacts import LEVER_RADIUS, hard_sphere_collisions, normal_damping, rebuild
+from .cells import build_cells, min_image, stencil_cells
+from .contacts import LEVER_RADIUS, ContactList, hard_sphere_collisions, normal_damping, rebuild
 from .history import META_COUNT
 from .rng import uniform2
 
@@ -138,7 +138,7 @@ class ContactPhase(NamedTuple):
     bed_overlap_max: np.ndarray  # (N,) largest overlap with a bed sphere (d)
     contact_substeps: np.ndarray  # (N,) int64 Σ sub-steps in contact (statistics)
     overlap_sum: np.ndarray  # (N,) float64 Σ overlap over those sub-steps (d)
-    counters: np.ndarray  # (4,) int64: list rebuilds, overruns, wakes, sub-stepped grain-steps
+    counters: np.ndarray  # (5,) int64: list rebuilds, overruns, wakes, sub-stepped grain-steps, missed
 
 
 def make_contact_phase(n: int) -> ContactPhase:
@@ -147,7 +147,7 @@ def make_contact_phase(n: int) -> ContactPhase:
         np.zeros(n, np.uint8), np.zeros(n, np.int64), np.zeros(1, np.int64), np.zeros(n, np.uint8),
         np.zeros(n, np.uint8), np.zeros(n), z3(), z3(), z3(), z3(), z3(), z3(), z3(), z3(), z3(),
         np.zeros(n), np.zeros(n), z3(), np.zeros(n), np.zeros(n), np.zeros(n, np.int64), np.zeros(n),
-        np.zeros(4, np.int64),
+        np.zeros(5, np.int64),
     )
 
 
@@ -757,6 +757,14 @@ def _apply(st, x0w, cl, ph, skin_half):
 
 
 @njit(cache=True)
+def _with_skin(cl, skin):
+    """The ContactList with a larger skin (cells unchanged: they must be wide enough)."""
+    return ContactList(cl.grid, 1.0 + skin, skin, cl.cell_of, cl.cell_start,
+                       cl.cell_count, cl.order, cl.ref_pos, cl.nbr, cl.nbr_count, cl.shear, cl.touch, cl.nbr2,
+                       cl.nbr_count2, cl.shear2, cl.touch2, cl.n_touch, cl.collisions, cl.max_overlap, cl.builds)
+
+
+@njit(cache=True)
 def soft_contact_phase(st, x0w, model, cl, ph, bc, t0, step, dt, n_sub):
     """Phase 2 of the module docstring for all grains: the free flight (x₀ in ``x0w``
     (N, 9) = w.x0, x₁ in ``st``) of step ``step`` (from t0) corrected by soft contacts
@@ -775,10 +783,21 @@ def soft_contact_phase(st, x0w, model, cl, ph, bc, t0, step, dt, n_sub):
                 ph.x0pos[i, a] = x0w[i, a]
         cl = rebuild(ph.x0pos, cl)
         ph.counters[0] += 1
+        fastest = 0.0
         for i in range(n):
             ph.ref_bound[i] = ph.reach[i]  # the list is now built at x₀
-            if ph.reach[i] > skin_half:  # a grain faster than the skin allows (docstring)
-                ph.counters[1] += 1
+            fastest = max(fastest, ph.reach[i])
+        if fastest > skin_half:
+            # a grain faster than the skin allows: grow the skin as far as the cells allow
+            widest = min(cl.grid.size[0], min(cl.grid.size[1], cl.grid.size[2])) - model.diameter
+            skin = min(2.5 * fastest, widest)
+            if skin > cl.skin:
+                cl = _with_skin(cl, skin)
+                cl = rebuild(ph.x0pos, cl)
+                skin_half = 0.5 * cl.skin
+            for i in range(n):
+                if ph.reach[i] > skin_half:  # still too fast: a contact might be missed
+                    ph.counters[1] += 1
     _engage(x0w, pos, model, cl, ph, bc)
     m = 0
     for i in range(n):
@@ -812,8 +831,46 @@ def soft_contact_phase(st, x0w, model, cl, ph, bc, t0, step, dt, n_sub):
         _wake_up(x0w, st, bc, model, cl, s_next, dt, h, True, ph, 0)
         _kick(model, ph, h, 0, ph.n_act[0])
     ph.counters[3] += ph.n_act[0]
-    ph.counters[1] += _apply(st, x0w, cl, ph, skin_half)
+    over = _apply(st, x0w, cl, ph, skin_half)
+    if over > 0:
+        # a grain may have left the list's reach: look for pairs in contact now that the
+        # list does not hold (an actual miss), with fresh cells
+        ph.counters[1] += over
+        ph.counters[4] += _missed_contacts(st.pos, cl)
     return cl
+
+
+@njit(cache=True)
+def _missed_contacts(pos, cl):
+    """Pairs closer than d at ``pos`` that are not in each other's neighbour list."""
+    g = cl.grid
+    n = pos.shape[0]
+    cell_of = np.empty(n, np.int64)
+    start = np.empty(cl.cell_start.shape[0], np.int64)
+    count = np.empty(cl.cell_count.shape[0], np.int64)
+    order = np.empty(n, np.int64)
+    build_cells(pos, g, cell_of, start, count, order)
+    cells = np.empty(27, np.int64)
+    missed = 0
+    for i in range(n):
+        m = stencil_cells(g, cell_of[i], cells)
+        for c in range(m):
+            for q in range(start[cells[c]], start[cells[c]] + count[cells[c]]):
+                j = order[q]
+                if j <= i:
+                    continue
+                dx = min_image(pos[i, 0] - pos[j, 0], g.box[0], g.periodic[0])
+                dy = min_image(pos[i, 1] - pos[j, 1], g.box[1], g.periodic[1])
+                dz = min_image(pos[i, 2] - pos[j, 2], g.box[2], g.periodic[2])
+                if dx * dx + dy * dy + dz * dz >= 1.0:
+                    continue
+                listed = False
+                for k in range(cl.nbr_count[i]):
+                    if cl.nbr[i, k] == j:
+                        listed = True
+                if not listed:
+                    missed += 1
+    return missed
 
 
 @njit(cache=True)

@@ -26,13 +26,15 @@ import numpy as np
 from numba import njit, objmode, prange
 
 from .collide import hard_contact_phase, make_bed_context, make_contact_phase, soft_contact_phase
-from .contacts import contact_model_from_case, make_contact_list
+from .contacts import contact_model_from_case, make_contact_list, rebuild
 from .integrator import OK, NOT_FINITE, bed_check_particle, free_flight_particle
 from .packed_bed import make_packed_bed, packed_bed_check_particle
 
 CONTACTS_OFF, CONTACTS_SOFT, CONTACTS_HARD = 0, 1, 2
 BED_VIRTUAL, BED_PACKED = 0, 1
 SKIN_SPEED = 20.0  # u*: the default skin covers a grain at this speed over one step, ×1.2
+SKIN_GROWTH = 2.0  # cells are made wide enough for this many times the skin
+BED_CONTACT_STATE = ("slot_id", "slot_c", "slot_shear", "in_bed")  # checkpointed (state_arrays)
 LIST_HEIGHT = (4.0, 60.0)  # d: bounds of the contact grid's height (grains above share its top layer)
 
 __all__ = ["Stepper", "advance_split", "default_skin"]
@@ -159,14 +161,17 @@ class Stepper:
         self.pp_collisions_hard = 0
 
     def start(self, pos):
-        """Build the contact list on the initial positions (N, 3) (particle units)."""
-        if self.contacts_mode != CONTACTS_OFF:
-            counters = (self.cl.collisions.copy(), self.cl.max_overlap.copy())
-            self.cl = make_contact_list(pos, self.box, (True, False, True), 1.0,
-                                        self.skin if self.contacts_mode == CONTACTS_SOFT else 0.0)
-            if len(counters[0]) == len(pos):
-                self.cl.collisions[:] = counters[0]
-                self.cl.max_overlap[:] = counters[1]
+        """Build the contact list on the initial positions (N, 3) (particle units). Soft
+        contacts: cells wide enough for SKIN_GROWTH × the skin, so that the contact phase
+        can widen the skin for a fast grain without new cells (collide.py)."""
+        if self.contacts_mode == CONTACTS_HARD:
+            self.cl = make_contact_list(pos, self.box, (True, False, True), 1.0, 0.0)
+        elif self.contacts_mode == CONTACTS_SOFT:
+            lx, _, lz = self.box
+            widest = min(SKIN_GROWTH * self.skin, 0.5 * min(lx, lz) - 1.0)
+            cl = make_contact_list(pos, self.box, (True, False, True), 1.0, max(widest, self.skin))
+            self.cl = rebuild(np.ascontiguousarray(pos, dtype=np.float64),
+                              cl._replace(cutoff=1.0 + self.skin, skin=self.skin))
 
     def advance(self, f, st, ws, t0: float, n_steps: int, step0: int) -> int:
         """n_steps steps from t0 (global step index step0); returns the steps done."""
@@ -227,6 +232,9 @@ class Stepper:
                 "list_rebuilds_in_steps": int(ph.counters[0]),
                 "list_builds_total": int(cl.builds[0]),
                 "overruns": int(ph.counters[1]),
+                "missed_contacts": int(ph.counters[4]),
+                "overruns_are": "grain-steps whose path may have left the neighbour list's reach "
+                                "(then checked: missed_contacts = pairs found in contact but not listed)",
                 "wakes": int(ph.counters[2]),
                 "substepped_grain_steps": int(ph.counters[3]),
             }
@@ -247,7 +255,11 @@ class Stepper:
             out.update({"cl_" + k: getattr(cl, k) for k in
                         ("ref_pos", "nbr", "nbr_count", "shear", "touch", "n_touch", "collisions",
                          "max_overlap", "builds")})
-            out.update({"ph_" + k: getattr(ph, k) for k in ("contact_substeps", "overlap_sum", "counters")})
+            out.update({"ph_" + k: getattr(ph, k) for k in ("contact_substeps", "overlap_sum", "counters",
+                                                            "bed_overlap_max")})
+            # the bed as a soft contact of sub-stepped grains: its springs and contact slots
+            # carry over from step to step (collide.BedContext)
+            out.update({"bc_" + k: getattr(self.bc, k) for k in BED_CONTACT_STATE})
         return out
 
     def load_state_arrays(self, arrays: dict, pos) -> None:
@@ -268,5 +280,7 @@ class Stepper:
             getattr(cl, name)[...] = arrays["cl_" + name]
         build_cells(cl.ref_pos, cl.grid, cl.cell_of, cl.cell_start, cl.cell_count, cl.order)
         self.cl = cl
-        for name in ("contact_substeps", "overlap_sum", "counters"):
+        for name in ("contact_substeps", "overlap_sum", "counters", "bed_overlap_max"):
             getattr(self.ph, name)[...] = arrays["ph_" + name]
+        for name in BED_CONTACT_STATE:
+            getattr(self.bc, name)[...] = arrays["bc_" + name]

@@ -1,0 +1,222 @@
+"""Grain contacts and the packed bed inside the run loop (issue 4; collide.py, stepping.py,
+packed_bed.py). The binary collision physics itself is tested in test_contacts.py; here:
+the contact phase reproduces contacts.advance_granular on straight free-flight paths, runs
+with contacts keep overlaps small and grains above the bed, contacts change the result,
+and the packed bed rebounds along the real normal and is never penetrated."""
+import math
+
+import numpy as np
+import pytest
+
+from saltation import contacts as K
+from saltation.collide import make_bed_context, make_contact_phase, soft_contact_phase
+from saltation.integrator import make_state
+from saltation.packed_bed import BED_CENTRE_Y, hexagonal_layer, make_packed_bed, packed_bed_check_particle
+from saltation.integrator import make_workspace
+from saltation.run import run
+
+D = 0.69e-3
+
+
+def small_case(model="soft", n=400, duration=0.15, bed="virtual", seed=3, source="loglaw", **extra):
+    """A small, dense loglaw case: 400 grains in 40 d × 20 d × 6 d (C ≈ 4.4 %)."""
+    case = {
+        "particle": {"diameter": D, "density": 2650.0},
+        "fluid": {"density": 1000.0, "viscosity": 1e-6},
+        "flow": {"source": source, "tau_ratio": 1.79},
+        "bed": {"model": bed},
+        "collisions": {"model": model},
+        "run": {"n_particles": n, "duration": duration, "dt_particle": 0.02, "seed": seed,
+                "domain": [40 * D, 20 * D, 6 * D], "threads": 1},
+        "output": {"tracks": True, "vtk": False, "tracks_interval": 0.02 * 0.0273 * 5},
+    }
+    for key, value in extra.items():
+        table, name = key.split(".")
+        case.setdefault(table, {})[name] = value
+    return case
+
+
+# ----------------------------------------------------------------------------- kernel
+
+
+def test_contact_phase_reproduces_velocity_verlet_on_straight_paths():
+    """No fluid force: the free flight is a straight line, so the contact phase (Hermite
+    path + deviation) must give what contacts.advance_granular gives for the same
+    sub-steps — same restitution, momentum, spins (the duplicated force arithmetic)."""
+    model = K.make_contact_model(5e5, 0.65, 0.3)
+    dt, n_sub, steps = 0.02, 128, 6
+    pos0 = np.array([[5.0, 3.0, 5.0], [5.0 + 1.03, 3.2, 5.1]])
+    vel0 = np.array([[2.0, 0.0, 0.5], [-1.5, -0.3, 0.0]])
+    spin0 = np.array([[0.0, 0.0, -1.0], [0.3, 0.0, 0.0]])
+    box = (12.0, 8.0, 12.0)
+    # reference: velocity Verlet with contacts only
+    p_ref, v_ref, w_ref = pos0.copy(), vel0.copy(), spin0.copy()
+    cl_ref = K.make_contact_list(p_ref, box, (True, False, True), 1.0, 0.5)
+    K.advance_granular(p_ref, v_ref, w_ref, np.zeros((2, 3)), np.zeros((2, 3)), model, cl_ref, dt / n_sub, steps * n_sub)
+    # the run loop's contact phase, step by step
+    st = make_state(pos0, vel0, spin0, 0.0, 4)
+    ws = make_workspace(2)
+    cl = K.make_contact_list(st.pos, box, (True, False, True), 1.0, 0.5)
+    ph = make_contact_phase(2)
+    pb = make_packed_bed(3.0, 3.0)
+    bc = make_bed_context(2, False, pb, 0.65, 0.1, 0.5, model.kn, model.kt, 0, np.full(2, -2, np.int64))
+    for s in range(steps):
+        ws.x0[:, 0:3] = st.pos
+        ws.x0[:, 3:6] = st.vel
+        ws.x0[:, 6:9] = st.spin
+        st.pos[:] += dt * st.vel  # free flight without forces
+        cl = soft_contact_phase(st, ws.x0, model, cl, ph, bc, s * dt, s, dt, n_sub)
+    assert cl.collisions.sum() == 2 and cl_ref.collisions.sum() == 2
+    np.testing.assert_allclose(st.pos, p_ref, atol=1e-9)
+    np.testing.assert_allclose(st.vel, v_ref, atol=1e-8)
+    np.testing.assert_allclose(st.spin, w_ref, atol=1e-7)
+    # and the collision did something: the pair now separates
+    assert np.dot(st.vel[1] - st.vel[0], st.pos[1] - st.pos[0]) > 0
+
+
+def test_a_grain_not_engaged_is_woken_when_a_deflected_grain_hits_it():
+    """Grain 2 sits still out of reach of the undeflected paths; grain 0 is knocked
+    towards it by grain 1 within the step: the wake-up must give a real contact (both
+    grains feel it, momentum conserved)."""
+    model = K.make_contact_model(5e5, 0.9, 0.0)
+    dt, n_sub = 0.02, 128
+    pos0 = np.array([[5.0, 3.0, 5.0], [5.0 - 1.05, 3.0, 5.0], [5.0 + 1.0 + 0.1, 3.0, 5.0]])
+    vel0 = np.array([[0.0, 0.0, 0.0], [12.0, 0.0, 0.0], [0.0, 0.0, 0.0]])
+    st = make_state(pos0, vel0, np.zeros((3, 3)), 0.0, 4)
+    ws = make_workspace(3)
+    cl = K.make_contact_list(st.pos, (12.0, 8.0, 12.0), (True, False, True), 1.0, 0.6)
+    ph = make_contact_phase(3)
+    bc = make_bed_context(3, False, make_packed_bed(3.0, 3.0), 0.65, 0.1, 0.5, model.kn, model.kt, 0,
+                          np.full(3, -2, np.int64))
+    p_total = st.vel.sum(axis=0).copy()
+    for s in range(3):
+        ws.x0[:, 0:3] = st.pos
+        ws.x0[:, 3:6] = st.vel
+        ws.x0[:, 6:9] = st.spin
+        st.pos[:] += dt * st.vel
+        cl = soft_contact_phase(st, ws.x0, model, cl, ph, bc, s * dt, s, dt, n_sub)
+    assert ph.counters[2] >= 1  # a wake-up happened
+    assert st.vel[2, 0] > 1.0  # grain 2 was hit
+    np.testing.assert_allclose(st.vel.sum(axis=0), p_total, atol=1e-9)
+
+
+# ----------------------------------------------------------------------------- runs
+
+
+@pytest.fixture(scope="module")
+def soft_and_off(tmp_path_factory):
+    base = tmp_path_factory.mktemp("runs")
+    soft = run(small_case("soft"), out=base / "soft", progress=False)
+    off = run(small_case("off"), out=base / "off", progress=False)
+    return soft, off
+
+
+def test_dense_soft_run_collides_with_small_overlaps_and_stays_above_the_bed(soft_and_off):
+    soft, _ = soft_and_off
+    s = soft.summary
+    c = s["collisions"]
+    assert 0.03 < s["concentration"] < 0.05
+    assert c["particle_particle"] > 0 and c["per_particle"] > 0
+    per = soft.directory / "particles.parquet"
+    import pandas as pd
+
+    table = pd.read_parquet(per)
+    assert table["collisions"].sum() == 2 * c["particle_particle"]
+    # SPEC §5: overlaps ≲ 1 % d, contacts resolved in ≳ 20 sub-steps
+    assert c["overlap"]["max_over_d"] < 0.01
+    assert 0.0 < c["overlap"]["mean_over_d"] < 0.005
+    assert c["overlap"]["contact_duration_substeps_mean"] >= 19.0
+    assert c["contact_phase"]["missed_contacts"] == 0
+    # no grain below the bed: centre at most the largest soft-bed overlap under d/2
+    assert soft.tracks["y"].min() > 0.5 - 0.01
+    t = s["timing"]
+    assert t["particle_collisions_s"] > 0 and t["bed_s"] > 0 and t["free_flight_s"] > 0
+    assert t["free_flight_s"] + t["particle_collisions_s"] + t["bed_s"] <= t["kernel_s"] * 1.001
+
+
+def test_contacts_change_the_result(soft_and_off):
+    soft, off = soft_and_off
+    assert off.summary["collisions"]["particle_particle"] == 0
+    a = soft.tracks.sort_values(["t", "particle"])
+    b = off.tracks.sort_values(["t", "particle"])
+    assert len(a) == len(b)
+    last = a["t"].max()
+    diff = np.abs(a[a.t == last][["x", "y", "z"]].to_numpy() - b[b.t == last][["x", "y", "z"]].to_numpy())
+    assert np.mean(diff.max(axis=1) > 0.1) > 0.2  # many grains ended elsewhere
+
+
+def test_hard_sphere_run_collides(tmp_path):
+    res = run(small_case("hard", duration=0.08), out=tmp_path / "hard", progress=False)
+    c = res.summary["collisions"]
+    assert c["model"] == "hard" and c["particle_particle"] > 0
+    assert np.isfinite(res.tracks[["x", "y", "z", "u", "v", "w"]].to_numpy()).all()
+
+
+# ----------------------------------------------------------------------------- packed bed
+
+
+def test_hexagonal_layer_is_close_packed_and_periodic():
+    centres, sx, sz = hexagonal_layer(20.0, 10.0)
+    assert abs(sx - 1.0) < 0.05 and abs(sz - math.sqrt(3) / 2) < 0.05
+    assert np.all(centres[:, 1] == BED_CENTRE_Y)
+    # nearest-neighbour distance (minimum image) ≈ d everywhere, six neighbours each
+    d = centres[:, None, [0, 2]] - centres[None, :, [0, 2]]
+    d[..., 0] -= 20.0 * np.round(d[..., 0] / 20.0)
+    d[..., 1] -= 10.0 * np.round(d[..., 1] / 10.0)
+    r = np.sqrt((d ** 2).sum(-1)) + np.eye(len(centres)) * 9
+    assert np.all(np.abs(r.min(axis=1) - 1.0) < 0.06)
+    assert np.all((r < 1.1).sum(axis=1) == 6)
+
+
+def drop_on_bed(offset_x, offset_z=0.0, speed=3.0, e=1.0, f=0.0):
+    """One grain falling vertically onto bed sphere 0's top, offset sideways; one step."""
+    pb = make_packed_bed(20.0, 10.0)
+    k = int(np.argmin(np.abs(pb.centres[:, 0] - 10.0) + np.abs(pb.centres[:, 2] - 5.0)))
+    c = pb.centres[k]
+    x_hit = np.array([c[0] + offset_x, 0.0, c[2] + offset_z])
+    x_hit[1] = c[1] + math.sqrt(1.0 - offset_x ** 2 - offset_z ** 2)
+    dt = 0.02
+    vel = np.array([0.0, -speed, 0.0])
+    pos = x_hit + vel * (0.4 * dt)  # unresolved free flight for 40 % of the step after the hit
+    st = make_state(pos[None, :], vel[None, :], np.zeros((1, 3)), 0.0, 4)
+    ws = make_workspace(1)
+    ws.x0[0, :3] = pos - vel * dt
+    last = np.full(1, -2, np.int64)
+    hits = packed_bed_check_particle(st, ws, 0, 0.0, dt, 10, np.array([e, f, 0.5]), pb, last)
+    return hits, st, (x_hit - c), pb
+
+
+def test_grain_dropped_off_centre_rebounds_along_the_real_normal():
+    hits, st, n, _ = drop_on_bed(0.3)
+    assert hits == 1
+    n = n / np.linalg.norm(n)
+    v_in = np.array([0.0, -3.0, 0.0])
+    v_expected = v_in - 2.0 * np.dot(v_in, n) * n  # e = 1, f = 0: mirror about the tangent plane
+    np.testing.assert_allclose(st.vel[0], v_expected, atol=1e-9)
+    assert st.vel[0, 0] > 0.5  # deflected sideways, away from the sphere's top
+    hits, st2, _, _ = drop_on_bed(-0.3)
+    assert st2.vel[0, 0] < -0.5
+    hits, st3, _, _ = drop_on_bed(0.0)
+    assert abs(st3.vel[0, 0]) < 1e-12 and st3.vel[0, 1] > 0  # head-on: straight back up
+    assert st.jump_count[0] == 1 and st.impacts[0] == 1
+
+
+def bed_clearance(pos, pb):
+    """Smallest centre distance of each grain to any bed sphere (minimum image in x, z)."""
+    lx, lz = pb.box[0], pb.box[2]
+    d = pos[:, None, :] - pb.centres[None, :, :]
+    d[..., 0] -= lx * np.round(d[..., 0] / lx)
+    d[..., 2] -= lz * np.round(d[..., 2] / lz)
+    return np.sqrt((d ** 2).sum(-1)).min(axis=1)
+
+
+@pytest.mark.parametrize("model", ["off", "soft"])
+def test_grains_never_penetrate_the_packed_bed(tmp_path, model):
+    case = small_case(model, n=120, duration=0.12, bed="packed")
+    res = run(case, out=tmp_path / model, progress=False)
+    tr = res.tracks
+    pb = make_packed_bed(40.0, 20.0)
+    clear = bed_clearance(tr[["x", "y", "z"]].to_numpy(), pb)
+    tol = 1e-9 if model == "off" else 0.01  # soft bed contacts overlap by ≲ 1 % d
+    assert clear.min() > 1.0 - tol
+    assert res.summary["collisions"]["bed"] > 0 and res.summary["jumps"]["recorded"] > 0
