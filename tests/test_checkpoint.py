@@ -156,3 +156,25 @@ def test_sigint_to_the_cli_checkpoints_and_resume_completes(tmp_path):
     assert sa["jumps"] == sb["jumps"] and sb["status"] == "completed"
     for name in ("jumps.parquet", "tracks.parquet"):
         pd.testing.assert_frame_equal(pd.read_parquet(tmp_path / "ref" / name), pd.read_parquet(out / name), check_exact=True)
+
+
+@pytest.mark.parametrize("model, bed", [("soft", "virtual"), ("hard", "virtual"), ("soft", "packed")])
+def test_resume_with_grain_contacts(tmp_path, model, bed):
+    """Dense grains in contact: the contact list, tangential (shear) history, the bed
+    springs of sub-stepped grains and the collision counters go into the checkpoint, so
+    the resumed run is still the uninterrupted one (a checkpoint at step 200 missed the
+    bed-contact slots before they were saved)."""
+    case = tiny_case(n=None, duration=0.4, **{
+        "collisions.model": model, "run.concentration": 0.0394, "run.domain": [0.012, 0.006, 0.028],
+        "bed.model": bed, "output.vtk": False, "output.checkpoint_steps": 150})
+    del case["run"]["n_particles"]
+    ref = run(case, out=tmp_path / "ref", progress=False)
+    assert ref.summary["collisions"]["particle_particle"] > 0
+    with pytest.raises(RunInterrupted):
+        simulation(case, tmp_path / "b", stop_after_steps=200).run()
+    res = run(case, out=tmp_path / "b", progress=False, resume=True)
+    assert res.summary["collisions"] == ref.summary["collisions"]
+    assert res.summary["jumps"] == ref.summary["jumps"]
+    for name in ("jumps.parquet", "tracks.parquet"):
+        pd.testing.assert_frame_equal(pd.read_parquet(tmp_path / "ref" / name), pd.read_parquet(tmp_path / "b" / name),
+                                      check_exact=True)
