@@ -135,6 +135,7 @@ class ContactPhase(NamedTuple):
     ref_bound: np.ndarray  # (N,) bound on the free-flight path's distance from the list's reference
     nrm: np.ndarray  # (N,3) scratch: virtual bed normal
     margin: np.ndarray  # (N,) scratch: engagement reach incl. the bed-rebound margin
+    start: np.ndarray  # (N,) earliest possible contact in the step (fraction s; inf: none)
     bed_overlap_max: np.ndarray  # (N,) largest overlap with a bed sphere (d)
     contact_substeps: np.ndarray  # (N,) int64 Σ sub-steps in contact (statistics)
     overlap_sum: np.ndarray  # (N,) float64 Σ overlap over those sub-steps (d)
@@ -146,8 +147,8 @@ def make_contact_phase(n: int) -> ContactPhase:
     return ContactPhase(
         np.zeros(n, np.uint8), np.zeros(n, np.int64), np.zeros(1, np.int64), np.zeros(n, np.uint8),
         np.zeros(n, np.uint8), np.zeros(n), z3(), z3(), z3(), z3(), z3(), z3(), z3(), z3(), z3(),
-        np.zeros(n), np.zeros(n), z3(), np.zeros(n), np.zeros(n), np.zeros(n, np.int64), np.zeros(n),
-        np.zeros(5, np.int64),
+        np.zeros(n), np.zeros(n), z3(), np.zeros(n), np.zeros(n), np.zeros(n), np.zeros(n, np.int64),
+        np.zeros(n), np.zeros(5, np.int64),
     )
 
 
@@ -628,43 +629,77 @@ def _reach(x0w, pos, vel, dt, cl, ph):
 @njit(cache=True)
 def _engage(x0w, pos, model, cl, ph, bc):
     """active[i] = 1 when i can touch a list neighbour on the undeflected paths, or is in
-    contact with a grain or the bed now. A grain whose path reaches the bed may be moved
-    by its (hard) bed rebound by up to twice its reach: that margin is added for it."""
+    contact with a grain or the bed now. A grain that ends the step below the bed top will
+    be moved by its (hard) bed rebound by up to twice its reach: that margin is added."""
     _margins(x0w, pos, ph.reach, ph.margin)
-    _engage_kernel(x0w, cl.grid.box, cl.grid.periodic, cl.nbr, cl.nbr_count, cl.n_touch, bc.in_bed, bc.slot_id,
-                   ph.margin, model.diameter, ph.active)
+    _engage_kernel(x0w, pos, cl.grid.box, cl.grid.periodic, cl.nbr, cl.nbr_count, cl.n_touch, bc.in_bed,
+                   bc.slot_id, ph.margin, ph.reach, model.diameter, ph.active, ph.start)
 
 
 @njit(cache=True, parallel=True)
-def _engage_kernel(x0w, box, per, nbr, nbr_count, n_touch, in_bed, slot_id, margin, d, active):
+def _engage_kernel(x0w, pos, box, per, nbr, nbr_count, n_touch, in_bed, slot_id, margin, reach, d, active, start):
+    """start[i]: the earliest step fraction s at which grain i can touch a grain or the
+    bed on the undeflected paths (inf: not in this step); active[i] = 0 (none started).
+    For a pair, |r(s)| ≥ |r₀| − s|Δx_i − Δx_j| − (b_i + b_j) with Δx the step's chord and
+    b the bulge of the cubic off it (b = reach − |Δx|), so no contact before
+    s = (|r₀| − d − b_i − b_j − bed margins)/|Δx_i − Δx_j|."""
     # every array an argument: Numba 0.68 dropped this loop's writes when they went to an
     # array taken from a named tuple inside the function
     lx, ly, lz = box[0], box[1], box[2]
     px, py, pz = per[0], per[1], per[2]
     for i in prange(x0w.shape[0]):
-        on = 1 if (n_touch[i] > 0 or in_bed[i] != 0) else 0
+        active[i] = 0
+        first = np.inf
+        if n_touch[i] > 0 or in_bed[i] != 0:
+            first = 0.0
         for slot in range(slot_id.shape[1]):
             if slot_id[i, slot] != FREE:
-                on = 1
+                first = 0.0
+        cxi = pos[i, 0] - x0w[i, 0]
+        cyi = pos[i, 1] - x0w[i, 1]
+        czi = pos[i, 2] - x0w[i, 2]
+        bi = reach[i] - math.sqrt(cxi * cxi + cyi * cyi + czi * czi)
+        if first > 0.0 and min(x0w[i, 1], pos[i, 1]) - bi < 0.5:
+            # the bottom may reach the bed top: from when on (soft bed if sub-stepped)
+            if pos[i, 1] < x0w[i, 1]:
+                first = max(0.0, (x0w[i, 1] - bi - 0.5) / (x0w[i, 1] - pos[i, 1]))
+            else:
+                first = 0.0
+            first = min(first, 1.0)
+        bed_hit = first <= 1.0
         k = 0
         m = nbr_count[i]
-        while on == 0 and k < m:
+        while first > 0.0 and k < m:
             j = nbr[i, k]
+            k += 1
             dxx = min_image(x0w[i, 0] - x0w[j, 0], lx, px)
             dyy = min_image(x0w[i, 1] - x0w[j, 1], ly, py)
             dzz = min_image(x0w[i, 2] - x0w[j, 2], lz, pz)
             lim = d + margin[i] + margin[j]
-            if dxx * dxx + dyy * dyy + dzz * dzz < lim * lim:
-                on = 1
-            k += 1
-        active[i] = on
+            r2 = dxx * dxx + dyy * dyy + dzz * dzz
+            if r2 >= lim * lim:
+                continue
+            cxj = pos[j, 0] - x0w[j, 0]
+            cyj = pos[j, 1] - x0w[j, 1]
+            czj = pos[j, 2] - x0w[j, 2]
+            bj = reach[j] - math.sqrt(cxj * cxj + cyj * cyj + czj * czj)
+            rel = math.sqrt((cxi - cxj) ** 2 + (cyi - cyj) ** 2 + (czi - czj) ** 2)
+            gap = math.sqrt(r2) - d - bi - bj - (margin[i] - reach[i]) - (margin[j] - reach[j])
+            if gap <= 0.0:
+                first = 0.0
+            elif rel > 0.0:
+                first = min(first, gap / rel)
+        if not bed_hit and first > 1.0:
+            first = np.inf
+        start[i] = first
 
 
 @njit(cache=True, parallel=True)
 def _margins(x0w, pos, reach, margin):
+    # the hard bed pass moves a grain only when it ends the step with its bottom below the
+    # bed top (y < 1/2), by at most twice its reach (integrator._bed_impact)
     for i in prange(x0w.shape[0]):
-        low = min(x0w[i, 1], pos[i, 1]) - reach[i]
-        margin[i] = reach[i] + (2.0 * reach[i] if low < 0.5 else 0.0)
+        margin[i] = reach[i] + (2.0 * reach[i] if pos[i, 1] < 0.5 else 0.0)
 
 
 @njit(cache=True, error_model="numpy", _nrt=False)
@@ -756,6 +791,33 @@ def _apply(st, x0w, cl, ph, skin_half):
     return over.sum()
 
 
+@njit(cache=True, error_model="numpy", _nrt=False)
+def _start_grains(x0w, pos, vel, spin, ph, cand, ptr, before, s_now, dt):
+    """Append the candidates cand[ptr:] with start < ``before`` (start ≤ 0 when
+    ``before`` is 0) to the active list at step fraction s_now: zero deviation and force,
+    on their free-flight path. Returns the new pointer."""
+    while ptr < cand.shape[0]:
+        i = cand[ptr]
+        t = ph.start[i]
+        if not (t < before or (before == 0.0 and t <= 0.0)):
+            break
+        ptr += 1
+        if ph.active[i] != 0:  # woken earlier
+            continue
+        for a in range(3):
+            ph.dx[i, a] = 0.0
+            ph.dv[i, a] = 0.0
+            ph.dw[i, a] = 0.0
+            ph.force[i, a] = 0.0
+            ph.torque[i, a] = 0.0
+        ph.dev_max[i] = 0.0
+        _set_path_inl(x0w, pos, vel, spin, i, s_now, dt, ph)
+        ph.active[i] = 1
+        ph.act[ph.n_act[0]] = i
+        ph.n_act[0] += 1
+    return ptr
+
+
 @njit(cache=True)
 def _with_skin(cl, skin):
     """The ContactList with a larger skin (cells unchanged: they must be wide enough)."""
@@ -799,30 +861,36 @@ def soft_contact_phase(st, x0w, model, cl, ph, bc, t0, step, dt, n_sub):
                 if ph.reach[i] > skin_half:  # still too fast: a contact might be missed
                     ph.counters[1] += 1
     _engage(x0w, pos, model, cl, ph, bc)
+    # candidates, by the time they may first touch something (docstring: who is sub-stepped)
+    n_cand = 0
+    for i in range(n):
+        if ph.start[i] <= 1.0:
+            n_cand += 1
+    ph.n_act[0] = 0
+    if n_cand == 0:
+        return cl
+    cand = np.empty(n_cand, np.int64)
+    key = np.empty(n_cand)
     m = 0
     for i in range(n):
-        if ph.active[i] != 0:
-            ph.act[m] = i
+        if ph.start[i] <= 1.0:
+            cand[m] = i
+            key[m] = ph.start[i]
             m += 1
-    ph.n_act[0] = m
-    if m == 0:
-        return cl
+    cand = cand[np.argsort(key, kind="mergesort")]
     h = dt / n_sub
-    for q in range(m):
-        i = ph.act[q]
-        ph.dev_max[i] = 0.0
-        for a in range(3):
-            ph.dx[i, a] = 0.0
-            ph.dv[i, a] = 0.0
-            ph.dw[i, a] = 0.0
-        _set_path(x0w, pos, vel, spin, i, 0.0, dt, ph)
-    # set-up: forces at s = 0 without advancing the tangential springs (their state is
-    # that of the previous step's last sub-step)
-    _forces(x0w, st, bc, model, cl, 0.0, dt, h, False, ph, 0, m)
+    # set-up: forces at s = 0 of the grains in contact now, without advancing the
+    # tangential springs (their state is that of the previous step's last sub-step)
+    ptr = _start_grains(x0w, pos, vel, spin, ph, cand, 0, 0.0, 0.0, dt)
+    _forces(x0w, st, bc, model, cl, 0.0, dt, h, False, ph, 0, ph.n_act[0])
     _wake_up(x0w, st, bc, model, cl, 0.0, dt, h, False, ph, 0)
     for k in range(n_sub):
         s_next = (k + 1) / n_sub
+        # grains that may touch something before s_next join now (no force at s_k: they
+        # cannot be touching anything yet)
+        ptr = _start_grains(x0w, pos, vel, spin, ph, cand, ptr, s_next, k / n_sub, dt)
         m = ph.n_act[0]
+        ph.counters[3] += m
         if m < PARALLEL_FROM:
             _substep_serial(x0w, st, bc, model, cl, ph, s_next, dt, h)
             continue
@@ -830,7 +898,6 @@ def soft_contact_phase(st, x0w, model, cl, ph, bc, t0, step, dt, n_sub):
         _forces(x0w, st, bc, model, cl, s_next, dt, h, True, ph, 0, m)
         _wake_up(x0w, st, bc, model, cl, s_next, dt, h, True, ph, 0)
         _kick(model, ph, h, 0, ph.n_act[0])
-    ph.counters[3] += ph.n_act[0]
     over = _apply(st, x0w, cl, ph, skin_half)
     if over > 0:
         # a grain may have left the list's reach: look for pairs in contact now that the

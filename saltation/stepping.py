@@ -236,7 +236,7 @@ class Stepper:
                 "overruns_are": "grain-steps whose path may have left the neighbour list's reach "
                                 "(then checked: missed_contacts = pairs found in contact but not listed)",
                 "wakes": int(ph.counters[2]),
-                "substepped_grain_steps": int(ph.counters[3]),
+                "substepped_grain_substeps": int(ph.counters[3]),
             }
         return out
 
