@@ -659,14 +659,14 @@ def _engage_kernel(x0w, pos, box, per, nbr, nbr_count, n_touch, in_bed, slot_id,
         cyi = pos[i, 1] - x0w[i, 1]
         czi = pos[i, 2] - x0w[i, 2]
         bi = reach[i] - math.sqrt(cxi * cxi + cyi * cyi + czi * czi)
-        if first > 0.0 and min(x0w[i, 1], pos[i, 1]) - bi < 0.5:
-            # the bottom may reach the bed top: from when on (soft bed if sub-stepped)
+        # when the bottom may reach the bed top (a grain that is sub-stepped has its bed
+        # contact in the sub-steps, so it must join before that)
+        bed_first = np.inf
+        if min(x0w[i, 1], pos[i, 1]) - bi < 0.5:
             if pos[i, 1] < x0w[i, 1]:
-                first = max(0.0, (x0w[i, 1] - bi - 0.5) / (x0w[i, 1] - pos[i, 1]))
+                bed_first = min(1.0, max(0.0, (x0w[i, 1] - bi - 0.5) / (x0w[i, 1] - pos[i, 1])))
             else:
-                first = 0.0
-            first = min(first, 1.0)
-        bed_hit = first <= 1.0
+                bed_first = 0.0
         k = 0
         m = nbr_count[i]
         while first > 0.0 and k < m:
@@ -689,9 +689,10 @@ def _engage_kernel(x0w, pos, box, per, nbr, nbr_count, n_touch, in_bed, slot_id,
                 first = 0.0
             elif rel > 0.0:
                 first = min(first, gap / rel)
-        if not bed_hit and first > 1.0:
-            first = np.inf
-        start[i] = first
+        if first > 1.0:
+            start[i] = np.inf  # touches no grain in this step: free flight and the hard bed
+        else:
+            start[i] = min(first, bed_first)
 
 
 @njit(cache=True, parallel=True)
