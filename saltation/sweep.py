@@ -357,6 +357,17 @@ def plan_workers(n_cases: int, workers: int | None, threads: int | None, cores: 
     return workers, threads
 
 
+def _cost(case: SweepCase) -> int:
+    """Grain-steps of a case (0 when its domain needs the LES box to resolve)."""
+    from .config import resolve_domain
+
+    try:
+        c = resolve_domain(load_case(case.tables, case.values))
+    except CaseError:
+        return 0
+    return int(c.n_particles) * int(c.n_steps)
+
+
 def run_sweep(source, out=None, scheduler: str | None = None, workers: int | None = None,
               threads_per_worker: int | None = None, processes: bool = True,
               echo: Callable[[str], None] | None = print) -> pd.DataFrame:
@@ -403,7 +414,8 @@ def run_sweep(source, out=None, scheduler: str | None = None, workers: int | Non
             say(f"LocalCluster on {where}: {n_workers} worker(s) x {threads} Numba thread(s)")
         try:
             futures = {}
-            for c in todo:
+            # dearest first (grains × steps), so that no long case starts last and runs alone
+            for c in sorted(todo, key=lambda c: -_cost(c)):
                 fut = client.submit(run_case, c.tables, c.values, c.name, str((out / "cases" / c.name).absolute()),
                                     threads, key=f"saltation-{stem}-{c.name}", pure=False)
                 futures[fut] = c
