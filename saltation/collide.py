@@ -38,25 +38,57 @@ Contact mass: the grain's own mass (m = 1, I = 0.1, no added mass), as in the be
 rebound of SPEC §4; the dashpot is set from the restitution for that mass, so the
 realised restitution is the case's e whatever the mass convention.
 
-Which grains are sub-stepped (cost)
------------------------------------
-Only grains that can come into contact in this step: a grain i is *engaged* when some
-neighbour j in the Verlet list (cutoff d + skin) satisfies
-``|x₀ᵢ − x₀ⱼ| < d + Dᵢ + Dⱼ``, with ``D = |x₁ − x₀| + Δt(|u₀ − ū| + |u₁ − ū|)/4`` a bound on
-how far the Hermite path gets from x₀ (ū = (x₁ − x₀)/Δt; the second term bounds the
-cubic's bulge off its chord). By the triangle inequality no other pair can touch on
-undeflected paths. A grain deflected by a contact can still reach a grain that was not
-engaged: the force kernel notices any contact with a non-engaged grain and *wakes* it at
-that sub-step (its deviation is exactly zero until then), so no contact is missed. The
-cost of the phase is therefore n_sub × (grains near a contact), not n_sub × N.
+Which grains are sub-stepped, and from when (cost)
+-------------------------------------------------
+Only grains that can touch another grain in this step, and only from the earliest time
+they can. With Δx = x₁ − x₀ the step's chord and b = Δt(|u₀ − ū| + |u₁ − ū|)/4 (ū = Δx/Δt)
+a bound on how far the cubic bulges off it, two grains cannot touch before
 
-Neighbour list (contacts.ContactList, skin s): valid while no grain is more than s/2
-from where the list was built. Before each contact phase the bound
-``max(|x₀ − x_ref|, |x₁ − x_ref|) + bulge`` is checked and the list rebuilt at x₀ when it
-exceeds s/2; a grain that moves more than s/2 within one step, or is deflected that far,
-is counted in ``overruns`` (a contact with it might be missed; the skin default — twice
-the distance a grain at 15 u* covers in a step, ×1.2 — keeps it at zero in practice, and
-the run's summary reports it).
+    s_ij = (|x₀ᵢ − x₀ⱼ| − d − b_i − b_j) / |Δx_i − Δx_j|
+
+(triangle inequality); a grain joins the sub-steps at the sub-step before min_j s_ij
+(or at once when it is in contact now), with zero deviation — exact, since nothing has
+acted on it yet. A grain that can touch no other grain in the step (s_ij > 1 for all its
+list neighbours) is not sub-stepped at all and keeps the RK4 result and the hard bed. A
+grain deflected by a contact can still reach a grain that had not joined: the force
+kernel notices any contact with such a grain and *wakes* it at that sub-step (its
+deviation is exactly zero until then), so no contact is missed on deflected paths
+either. The cost of the phase is therefore n_sub × (grains close to a contact), not
+n_sub × N; ``counters[3]`` counts the grain-sub-steps actually done.
+
+The bed in the contact phase
+----------------------------
+A grain that is sub-stepped has its bed contacts inside the sub-steps, as soft contacts
+with fixed bed spheres of diameter d (the pair model with a fixed partner: m_eff = m,
+γ_n from the **bed** restitution, the bed friction, the same k_n and k_t): a position
+correction after the phase (the hard rebound moves a grain by up to ~|Δu| Δt ≈ 0.1 d)
+would put it into a neighbour it is touching, and the stiff spring would turn that
+overlap into a spurious kick (½ k_n δ² at δ = 0.02 d is a relative speed of ~20 u*).
+Packed bed: the real bed spheres (packed_bed.py), found through its cells. Virtual bed:
+when the grain's bottom first goes below the bed top, a virtual bed sphere is placed
+under it along a random normal (bed.virtual_bed_normal, the same counter-based draw as
+the hard virtual bed) and kept until the contact ends. The first bed contact after at
+least one step off the bed counts as a bed impact and closes a jump (SPEC §6); while the
+contact lasts the next jump's start moves with the grain. Such a grain joins the
+sub-steps no later than the time its bottom can reach the bed top. The other grains get
+the hard-sphere rebound of SPEC §4 in phase 3; a grain ending the step below the bed top
+may be moved by it by up to twice its reach, which the join test adds to its distance
+margin, so that such a move never pushes it into a grain it was not sub-stepped with.
+Known gap: a grain woken on a deflected path after its own free path went below the bed
+top starts its soft bed contact with that overlap (rare; not counted).
+
+Neighbour list (contacts.ContactList, skin s)
+---------------------------------------------
+Valid while no grain is more than s/2 from where the list was built. Before each
+contact phase the bound ``max(|x₀ − x_ref|, |x₁ − x_ref|) + b`` is checked and the list
+rebuilt at x₀ when it exceeds s/2 (with saltation speeds of ~10 u* and Δt = 0.02 d/u*
+that is most steps: a rebuild is one counting sort and one cell sweep, cheap next to the
+RK4 step). If a grain moves more than s/2 in one step, the skin is widened to 2.5× its
+reach, up to what the cells allow (stepping.Stepper makes them wide enough for twice the
+default skin, which covers 20 u*). A grain still faster, or deflected beyond the skin, is
+counted in ``overruns``; after such a step the end positions are searched afresh for
+pairs in contact that the list does not hold (``missed_contacts``, reported in
+summary.json; the tests require zero).
 
 Statistics (per grain, race-free): ``cl.collisions`` (contacts begun), ``cl.max_overlap``,
 and here ``contact_substeps`` (sub-steps spent in each contact, summed) and

@@ -43,6 +43,8 @@ Choices made here (the SPEC leaves them open)
 * Domain (``run.domain = [Lx, Lz, H]`` m): absent means the LES box at the run's u*
   (passed to :func:`resolve_domain` by the run loop); for the analytic and still sources,
   the paper's box [0.176, 0.088, 0.028] m.
+* Grain–grain contacts default to ``"soft"`` (SPEC §5; a single grain never meets one, so
+  it costs nothing there); the single-grain validation cases say ``"off"`` explicitly.
 * Soft contacts: stiffness absent means the smallest stiffness that keeps the overlap
   at ``max_overlap`` d for a relative normal speed of ``impact_speed`` u*; a given
   stiffness below it is an error. The contact (duration π√(m_eff/k)) is resolved in 20
@@ -375,9 +377,9 @@ class BedConfig(_Table):
 @dataclass(frozen=True)
 class CollisionsConfig(_Table):
     TABLE: ClassVar[str] = "collisions"
-    model: str = _key("off", kind="choice", choices=("soft", "hard", "off"),
-                      doc='particle–particle contacts: "soft" (spring–dashpot), "hard" '
-                          '(binary impulse) or "off"')
+    model: str = _key("soft", kind="choice", choices=("soft", "hard", "off"),
+                      doc='particle–particle contacts: "soft" (spring–dashpot, sub-stepped; '
+                          'the default), "hard" (binary impulse) or "off"')
     restitution: float = _key(0.65, kind="float", ge=0.0, le=1.0,
                               doc="grain–grain restitution e (Schmeeckle et al. 2001)")
     friction: float = _key(0.10, kind="float", ge=0.0,

@@ -148,7 +148,9 @@ class Stepper:
         if self.contacts_mode != CONTACTS_OFF and min(lx, lz) < 2.0 * cut:
             raise ValueError(f"the particle domain {lx:.4g} × {lz:.4g} d is too small for contacts "
                              f"with a cutoff of {cut:.4g} d (needs ≥ {2 * cut:.4g} d in x and z)")
-        self.cl = make_contact_list(np.zeros((n_list, 3)), self.box, (True, False, True), 1.0, skin_used)
+        # a placeholder until ``start`` has the positions (n coincident grains would all be
+        # each other's neighbours: an n × n list)
+        self.cl = make_contact_list(np.zeros((0, 3)), self.box, (True, False, True), 1.0, skin_used)
         self.ph = make_contact_phase(n_list)
         self.scratch = np.zeros(n_list, np.int64)
         self.pb = make_packed_bed(lx, lz) if self.bed_model == BED_PACKED else make_packed_bed(3.0, 3.0)
@@ -227,6 +229,8 @@ class Stepper:
                 "mean_is": "time-mean overlap over the sub-steps in contact",
                 "contact_duration_substeps_mean": sub / started if started else None,
                 "contact_duration_particle_mean": h * sub / started if started else None,
+                "bed_max_over_d": float(ph.bed_overlap_max.max(initial=0.0)),
+                "bed_is": "largest overlap of a sub-stepped grain with a (soft) bed sphere",
             }
             out["contact_phase"] = {
                 "list_rebuilds_in_steps": int(ph.counters[0]),
@@ -260,6 +264,7 @@ class Stepper:
             # the bed as a soft contact of sub-stepped grains: its springs and contact slots
             # carry over from step to step (collide.BedContext)
             out.update({"bc_" + k: getattr(self.bc, k) for k in BED_CONTACT_STATE})
+            out["cl_skin"] = np.array([cl.skin])  # widened for fast grains (collide.py)
         return out
 
     def load_state_arrays(self, arrays: dict, pos) -> None:
@@ -279,6 +284,9 @@ class Stepper:
         for name in ("ref_pos", "nbr", "nbr_count", "shear", "touch", "n_touch", "collisions", "max_overlap", "builds"):
             getattr(cl, name)[...] = arrays["cl_" + name]
         build_cells(cl.ref_pos, cl.grid, cl.cell_of, cl.cell_start, cl.cell_count, cl.order)
+        if "cl_skin" in arrays:
+            skin = float(arrays["cl_skin"][0])
+            cl = cl._replace(cutoff=1.0 + skin, skin=skin)
         self.cl = cl
         for name in ("contact_substeps", "overlap_sum", "counters", "bed_overlap_max"):
             getattr(self.ph, name)[...] = arrays["ph_" + name]
