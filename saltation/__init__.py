@@ -5,6 +5,8 @@ result with ``.summary``, ``.jumps`` and ``.tracks``.
 """
 __version__ = "0.1.0"
 
+import flowfields  # noqa: E402,F401  (sets the versioned Numba cache before any kernel loads)
+
 
 def run(case, out=None, progress=True, **overrides):
     """Run one case file (path) or dict of tables; overrides use "table.key" names."""
