@@ -109,6 +109,8 @@ BED_COEFFICIENT_SETS = {
 }
 
 _REQUIRED = "required"
+# particle.shape: the point-particle sphere, a natural mixture, or one Zingg class
+SHAPES = ("sphere", "mixture", "disk", "blade", "rod", "equant")
 
 
 class CaseError(ValueError):
@@ -132,7 +134,7 @@ def _key(default: Any = None, *, kind: str, doc: str, unit: str = "", required: 
          aliases: Mapping[str, str] | None = None):
     """One case-file key: a dataclass field whose metadata is its schema entry.
 
-    kind: "float" | "int" | "bool" | "str" | "path" | "choice" | "vec3".
+    kind: "float" | "int" | "bool" | "str" | "path" | "choice" | "vec3" | "fractions" | "ratios".
     """
     meta = dict(kind=kind, doc=doc, unit=unit, required=required, gt=gt, ge=ge, lt=lt,
                 le=le, choices=choices, aliases=dict(aliases or {}))
@@ -195,6 +197,8 @@ def _normalise(table: str, name: str, m: Mapping[str, Any], value: Any) -> Any:
             raise CaseError(f"{where} = {value!r} is not allowed: must be one of "
                             f"{allowed}{hint}", table, name)
         value = word
+    elif kind in ("fractions", "ratios"):
+        return _class_table(where, table, name, kind, value)
     elif kind == "vec3":
         if (not isinstance(value, (list, tuple)) or len(value) != 3
                 or any(isinstance(v, bool) or not isinstance(v, (int, float)) for v in value)):
@@ -216,6 +220,26 @@ def _normalise(table: str, name: str, m: Mapping[str, Any], value: Any) -> Any:
             raise CaseError(f"{where} = {value!r} is out of range: must be {_range_text(m)}",
                             table, name)
     return value
+
+
+def _class_table(where: str, table: str, name: str, kind: str, value: Any) -> dict:
+    """particle.fractions / particle.ratios: a table keyed by Zingg class, checked by
+    saltation.shapes (fractions in [0, 1] summing to 1; ratio ranges inside the class)."""
+    from .shapes import CLASSES, _check_ratios, check_fractions
+
+    if not isinstance(value, Mapping) or not value:
+        what = ("{disk = 0.43, blade = 0.09, rod = 0.14, equant = 0.34}" if kind == "fractions"
+                else "{disk = [[0.7, 1.0], [0.3, 0.6]], ...}")
+        raise CaseError(f"{where} must be an inline table keyed by Zingg class "
+                        f"({', '.join(CLASSES)}), e.g. {what}; got {value!r}", table, name)
+    try:
+        if kind == "fractions":
+            full = check_fractions({str(k): v for k, v in value.items()})
+            return {k: full[k] for k in CLASSES if k in value}
+        _check_ratios({str(k): v for k, v in value.items()})
+    except ValueError as err:
+        raise CaseError(f"{where}: {err}", table, name) from None
+    return {str(k): [[float(x) for x in v[0]], [float(x) for x in v[1]]] for k, v in value.items()}
 
 
 class _Table:
@@ -256,6 +280,47 @@ class ParticleConfig(_Table):
                            doc="grain diameter d (m)")
     density: float = _key(2650.0, kind="float", unit="kg/m³", gt=0.0,
                           doc="grain density ρp (kg/m³); default quartz")
+    # Irregular grains as bonded spheres (issue 6, seed 000 §2.4; saltation.shapes):
+    # ``diameter`` is then the nominal diameter Dn = (Dl Di Ds)^{1/3} of every grain.
+    shape: str = _key("sphere", kind="choice", choices=SHAPES,
+                      aliases={"spheres": "sphere", "natural": "mixture", "mix": "mixture",
+                               "disc": "disk", "disks": "disk", "blades": "blade",
+                               "rods": "rod", "equants": "equant"},
+                      doc='grain shape: "sphere" (point-particle model), "mixture" (Zingg '
+                          'classes drawn with particle.fractions) or one Zingg class '
+                          '"disk" | "blade" | "rod" | "equant" (bonded spheres, '
+                          'saltation.run_clusters); diameter is the nominal Dn')
+    fractions: dict | None = _key(kind="fractions",
+                                  doc='Zingg class fractions of shape = "mixture", an inline '
+                                      'table {disk, blade, rod, equant} summing to 1; absent: '
+                                      'Smith (2003) 0.43, 0.09, 0.14, 0.34')
+    ratios: dict | None = _key(kind="ratios",
+                               doc='axis-ratio ranges per Zingg class, {class = [[Di/Dl lo, hi], '
+                                   '[Ds/Di lo, hi]]}, uniform draws within the class; absent: '
+                                   'shapes.DEFAULT_RATIOS')
+
+    def _check(self):
+        if self.shape == "sphere":
+            for k in ("fractions", "ratios"):
+                if getattr(self, k) is not None:
+                    raise self._error(f'particle.{k} is given but particle.shape = "sphere": it '
+                                      f'applies to bonded-sphere shapes only ("mixture", '
+                                      f'{", ".join(chr(34) + c + chr(34) for c in SHAPES[2:])})', k)
+        if self.fractions is not None and self.shape != "mixture":
+            raise self._error(f'particle.fractions applies to shape = "mixture" only, got '
+                              f'shape = "{self.shape}" (a single class has fraction 1)', "fractions")
+
+    @property
+    def shape_fractions(self) -> dict[str, float]:
+        """Zingg class fractions in use: Smith (2003) for a mixture unless given; 1 for a
+        single class; {} for spheres."""
+        from .shapes import CLASSES, SMITH_2003
+
+        if self.shape == "sphere":
+            return {}
+        if self.shape != "mixture":
+            return {c: float(c == self.shape) for c in CLASSES}
+        return dict(self.fractions) if self.fractions is not None else dict(SMITH_2003)
 
 
 @dataclass(frozen=True)
@@ -1105,6 +1170,8 @@ def _toml_value(value: Any) -> str:
         return _toml_string(value)
     if isinstance(value, (list, tuple)):
         return "[" + ", ".join(_toml_value(v) for v in value) + "]"
+    if isinstance(value, Mapping):  # inline table (particle.fractions, particle.ratios)
+        return "{" + ", ".join(f"{k} = {_toml_value(v)}" for k, v in value.items()) + "}"
     raise TypeError(f"no TOML form for {value!r}")
 
 

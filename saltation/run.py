@@ -116,6 +116,10 @@ def run(case, out=None, progress=True, resume=False, **overrides) -> RunResult:
     ds = open_flow(case)
     case = resolve_domain(case, _les_box_m(ds, case) if case.flow.source == "les" else None)
     out = Path(out or case.output.directory or Path("runs") / (case.run.name or "run"))
+    if case.particle.shape != "sphere":  # bonded-sphere grains (issue 6): run_clusters.py
+        from .run_clusters import ClusterSimulation
+
+        return ClusterSimulation(case, ds, out, progress=progress, resume=resume).run()
     return Simulation(case, ds, out, progress=progress, resume=resume).run()
 
 

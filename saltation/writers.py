@@ -123,6 +123,30 @@ class TrackWriter(ParquetTableWriter):
         )
 
 
+CLUSTER_TRACK_COLUMNS = TRACK_COLUMNS + ("q0", "q1", "q2", "q3", "class_id")
+
+
+class ClusterTrackWriter(ParquetTableWriter):
+    """tracks.parquet of bonded-sphere grains (run_clusters.py): the sphere columns (spin =
+    the grain's angular velocity, world frame, u*/d) plus the orientation quaternion
+    q0..q3 (body → world, scalar first) and the grain's Zingg class id (summary.json
+    ``shape.class_ids``)."""
+
+    def __init__(self, path, **parts):
+        super().__init__(path, CLUSTER_TRACK_COLUMNS, ["int32"] + ["float64"] * 14 + ["int8"], **parts)
+
+    def write(self, t, particles, pos_unwrapped, vel, omega, quat, class_id):
+        n = len(particles)
+        self.append(
+            particle=particles.astype(np.int32), t=np.full(n, t),
+            x=pos_unwrapped[:, 0], y=pos_unwrapped[:, 1], z=pos_unwrapped[:, 2],
+            u=vel[:, 0], v=vel[:, 1], w=vel[:, 2],
+            spin_x=omega[:, 0], spin_y=omega[:, 1], spin_z=omega[:, 2],
+            q0=quat[:, 0], q1=quat[:, 1], q2=quat[:, 2], q3=quat[:, 3],
+            class_id=np.asarray(class_id, dtype=np.int8),
+        )
+
+
 class JumpWriter(ParquetTableWriter):
     """jumps.parquet: one row per jump (dimensionless: d, d/u*, u*)."""
 

@@ -1,0 +1,410 @@
+"""One saltation run of bonded-sphere grains (issue 6 item 5; seed 000 §2.4, §4.4).
+
+``saltation.run()`` hands a case here when ``particle.shape`` is not "sphere". The run
+mirrors run.py's :class:`~saltation.run.Simulation`: the same case keys, flow, time step,
+force switches and coefficients, initial conditions (initial.py), bed (virtual bed,
+clusters.py), jump collection and writers, and a summary.json with the same keys, plus:
+
+* ``shape``: the shape key, class fractions in use, grains and component spheres per
+  class, mean grain volume (d³), the class ids of the track column ``class_id``;
+* ``jumps_by_class``: the jump statistics of each Zingg class;
+* ``transport``: q (volume per unit width) and q* = q/√(R g d³) of the run
+  (analysis/transport.py), with the Ackers–White (1993) capacity for the LES channel and
+  the ratio of the two — see that module for why the ratio is not a model error;
+* ``spin``: mean spanwise angular velocity and mean |Ω| (u*/d) over the counted period.
+
+Grains. ``particle.diameter`` is the nominal diameter Dn = (Dl Di Ds)^{1/3} of every
+grain (the length scale d of the particle units). Axes are drawn by
+``shapes.draw_axes(n, fractions, ratios, Dn=1)`` — classes with the case's fractions
+(Smith 2003 by default; one class for shape = "disk" | "blade" | "rod" | "equant"),
+axis ratios uniform in the class's range — from their own random stream (seed
+[run.seed, 6]), so the grains' start (positions, velocities, spins: initial.py with
+run.seed, identical to a sphere run's) does not depend on the shapes. Orientations are
+uniformly random (Shoemake 1992, stream [run.seed, 7]); a grain whose lowest point would
+start lower than the lowest sphere can (0.1 d above the bed top) is raised until it is
+there.
+
+Not here (clear errors instead): grain–grain contacts between composites
+(collisions.model must be "off" when there is more than one grain), the packed bed,
+checkpoints and --resume. ParaView output holds the centres of mass (diameter = Dn).
+The bed rebound is computed inside the free-flight kernel, so the timing has no
+separate bed share (``timing.bed_s`` = 0, said in ``timing.note``).
+"""
+from __future__ import annotations
+
+import math
+import time
+from pathlib import Path
+
+import numba
+import numpy as np
+import pandas as pd
+
+from . import clusters, history, shapes
+from .config import Case, CaseError, dump_toml
+from .forces import CM, make_coefficients
+from .initial import Y_RANGE, initial_conditions
+from .writers import ClusterTrackWriter, JumpWriter, ParaViewWriter, write_json
+
+DISCARDED_JUMPS = 10  # as run.py (paper §3.2)
+CHUNK_STEPS = 200
+SERIAL_BELOW = 2000
+CLASS_IDS = {c: i for i, c in enumerate(shapes.CLASSES)}  # track column class_id
+MIN_START_BOTTOM = Y_RANGE[0] - 0.5  # d: lowest start of a sphere's bottom (initial.py)
+JUMP_CAPACITY = 16
+
+
+def check_case(case: Case) -> None:
+    """The parts of a case a bonded-sphere run cannot do: CaseError naming the key."""
+    n = int(case.n_particles or 1)
+    if case.collisions.model != "off" and n > 1:
+        raise CaseError(
+            f'collisions.model = "{case.collisions.model}" is not available with particle.shape = '
+            f'"{case.particle.shape}": grain–grain contacts between bonded-sphere grains are not '
+            f'implemented (run_clusters.py); set collisions.model = "off" (--set collisions.model=off)',
+            "collisions", "model")
+    if case.bed.model != "virtual":
+        raise CaseError(
+            f'bed.model = "{case.bed.model}" is not available with particle.shape = '
+            f'"{case.particle.shape}": bonded-sphere grains rebound on the virtual bed only; '
+            f'set bed.model = "virtual"', "bed", "model")
+
+
+def random_quaternions(n: int, rng) -> np.ndarray:
+    """n uniformly distributed unit quaternions (scalar first), Shoemake (1992)."""
+    u1, u2, u3 = rng.random(n), rng.random(n), rng.random(n)
+    a, b = np.sqrt(1.0 - u1), np.sqrt(u1)
+    return np.column_stack([b * np.cos(2 * np.pi * u3), a * np.sin(2 * np.pi * u2),
+                            a * np.cos(2 * np.pi * u2), b * np.sin(2 * np.pi * u3)])
+
+
+def draw_grains(case: Case, n: int):
+    """(classes list, axes (n, 3) in d, composites in d) of a case's grains."""
+    p = case.particle
+    fractions = p.shape_fractions
+    ratios = {k: (tuple(v[0]), tuple(v[1])) for k, v in (p.ratios or {}).items()}
+    classes, axes = shapes.draw_axes(n, fractions=fractions, ratios=ratios or None, Dn=1.0,
+                                     seed=[int(case.run.seed), 6])
+    return classes, axes, [shapes.build(*a) for a in axes]
+
+
+def _stats(rows: np.ndarray) -> dict:
+    """Jump statistics of rows (particle, jump, L, H, U) with the first jumps dropped."""
+    counted = rows[rows[:, 1] >= DISCARDED_JUMPS] if len(rows) else rows
+    counted = counted[np.lexsort((counted[:, 1], counted[:, 0]))] if len(counted) else counted
+    out = {"count": int(len(counted)), "recorded": int(len(rows)),
+           "discarded_first_per_particle": DISCARDED_JUMPS}
+    for key, col in (("H", 3), ("L", 2), ("U", 4)):
+        v = counted[:, col] if len(counted) else np.zeros(0)
+        out[f"{key}_mean"] = float(v.mean()) if len(v) else None
+        out[f"{key}_std"] = (float(v.std(ddof=1)) if len(v) > 1 else 0.0) if len(v) else None
+    out["units"] = "H, L in d; U in u*"
+    return out
+
+
+class ClusterSimulation:
+    """One run of bonded-sphere grains; ``run()`` drives it to the end (module docstring)."""
+
+    def __init__(self, case: Case, flow, out: Path, progress=True, resume=False):
+        from .run import SimulationError
+
+        if resume:
+            raise SimulationError(f'--resume is not available for bonded-sphere runs (particle.shape = '
+                                  f'"{case.particle.shape}"): run without it to start afresh')
+        check_case(case)
+        self.case, self.flow, self.out, self.progress = case, flow, Path(out), progress
+        self.n = int(case.n_particles)
+        d = case.particle.diameter
+        lx, lz, _ = case.domain
+        self.domain_d = (lx / d, lz / d)
+        self.dt = case.dt_particle
+        self.n_steps = case.n_steps
+        self.re_star = case.shear_reynolds
+        f = case.forces
+        self.coef = make_coefficients(
+            tau_star=case.shields_number, R=case.submerged_specific_gravity, re_star=self.re_star,
+            slope=case.flow.slope_radians, Cm=f.added_mass_coefficient, C_L=f.lift_coefficient,
+            C_Omega=f.magnus_coefficient, weight=f.weight, drag=f.drag, lift=f.lift, magnus=f.magnus,
+            added_mass=f.added_mass, fluid_acceleration=f.fluid_acceleration, basset=f.basset)
+        self.bed = np.array([case.bed_restitution, case.bed_friction, case.bed.max_tilt_radians])
+        self.n_window = f.basset_window
+        self.hist_coef = history.make_history_coefficients(self.dt, self.n_window)
+        self.top_d = float(flow.y[-1]) / self.re_star
+        self.classes, self.axes, self.composites = draw_grains(case, self.n)
+        self.class_id = np.array([CLASS_IDS[c] for c in self.classes], dtype=np.int8)
+
+    # ------------------------------------------------------------------ set-up
+    def threads(self) -> int:
+        most = numba.config.NUMBA_NUM_THREADS
+        if self.case.run.threads:
+            return min(self.case.run.threads, most)
+        return 1 if self.n < SERIAL_BELOW else most
+
+    def _initial_state(self):
+        c = self.case
+        pos, vel, spin = initial_conditions(self.n, self.domain_d, c.run.seed, c.run.release_height)
+        quat = random_quaternions(self.n, np.random.default_rng([int(c.run.seed), 7]))
+        st = clusters.make_cluster_state(self.composites, pos, vel, quat, spin, 0.0, self.n_window,
+                                         R=c.submerged_specific_gravity, Cm=self.coef[CM],
+                                         re_star=self.re_star, jump_capacity=JUMP_CAPACITY)
+        low = clusters.lowest_points(st)
+        lift = np.maximum(MIN_START_BOTTOM - low, 0.0)
+        if np.any(lift > 0):
+            st.pos[:, 1] += lift
+            st.jump_ymax[:] = clusters.lowest_points(st)
+        return st
+
+    def _collect_jumps(self, st, writer: JumpWriter, rows: list):
+        nb = st.jump_buf_n
+        idx = np.nonzero(nb)[0]
+        if len(idx) == 0:
+            return
+        counts = nb[idx]
+        part = np.repeat(idx, counts)
+        data = np.concatenate([st.jump_buf[p, : nb[p]] for p in idx])
+        first = st.jump_count[idx] - counts
+        jidx = np.concatenate([np.arange(a, a + k) for a, k in zip(first, counts)])
+        length, height, duration = data[:, 1], data[:, 2], data[:, 3]
+        velocity = np.divide(length, duration, out=np.zeros_like(length), where=duration > 0)
+        writer.append(particle=part.astype(np.int32), jump=jidx.astype(np.int32), t_start=data[:, 0],
+                      length=length, height=height, duration=duration, velocity=velocity)
+        rows.append(np.column_stack([part, jidx, length, height, velocity]))
+        nb[idx] = 0
+
+    # ------------------------------------------------------------------ main loop
+    def run(self):
+        from tqdm import tqdm
+
+        from .analysis.variance import AnalysisError, RunVariance
+        from .run import RunResult, SimulationError, VARIANCE_FILE
+
+        c = self.case
+        self.out.mkdir(parents=True, exist_ok=True)
+        (self.out / "config.toml").write_text(dump_toml(c))
+        numba.set_num_threads(self.threads())
+        threads = numba.get_num_threads()
+        st = self._initial_state()
+        w = clusters.make_cluster_work(st)
+        f = self.flow.arrays
+        d, ts = c.particle.diameter, c.time_scale
+        jw = JumpWriter(self.out / "jumps.parquet")
+        tw = ClusterTrackWriter(self.out / "tracks.parquet") if c.output.tracks else None
+        vw = ParaViewWriter(self.out, d) if c.output.vtk else None
+        var = None
+        if c.output.variance and self.n >= 2:
+            try:
+                var = RunVariance(self.n, self.n_steps, c.variance_every, self.dt, c.output.variance_origins)
+            except AnalysisError:
+                var = None
+        if var is None:
+            (self.out / VARIANCE_FILE).unlink(missing_ok=True)
+        every = [e for e, wr in ((c.tracks_every, tw), (c.vtk_every, vw)) if wr is not None] + [CHUNK_STEPS]
+        seed = int(c.run.seed)
+        wall0 = time.perf_counter()
+        t_compile = time.perf_counter()
+        clusters.advance_clusters(f, self.coef, self.bed, seed, st, w, self.hist_coef, 0.0, self.dt, 0,
+                                  self.top_d)
+        compile_s = time.perf_counter() - t_compile
+        kernel_s = 0.0
+        status = "completed"
+        step = 0
+        rows: list = []
+        idx = np.arange(self.n)
+        bar = tqdm(total=self.n_steps, desc=c.run.name or "run", unit="step", disable=not self.progress, delay=2.0)
+
+        def output(s):
+            t = s * self.dt
+            if tw is not None and s % c.tracks_every == 0:
+                tw.write(t, idx, st.pos, st.vel, st.omega, st.quat, self.class_id)
+            if vw is not None and s % c.vtk_every == 0:
+                vw.write(t * ts, st.pos * d, st.vel * (d / ts), st.omega / ts)
+            if var is not None:
+                var.sample_step(s, st.pos)
+
+        try:
+            output(0)
+            while step < self.n_steps:
+                nxt = min([self.n_steps] + [(step // e + 1) * e for e in every]
+                          + [s for s in [var.next_step(step) if var is not None else None] if s is not None])
+                t0 = time.perf_counter()
+                done = int(clusters.advance_clusters(f, self.coef, self.bed, seed, st, w, self.hist_coef,
+                                                     step * self.dt, self.dt, nxt - step, self.top_d))
+                kernel_s += time.perf_counter() - t0
+                self._collect_jumps(st, jw, rows)
+                if np.any(st.status == clusters.NOT_FINITE):
+                    status = "failed"
+                    p = int(np.nonzero(st.status == clusters.NOT_FINITE)[0][0])
+                    raise SimulationError(
+                        f"grain {p} ({self.classes[p]}) became non-finite during step {step + done}: position "
+                        f"{st.pos[p].tolist()}, velocity {st.vel[p].tolist()}, angular velocity "
+                        f"{st.omega[p].tolist()}; outputs up to here are kept in {self.out}")
+                step += done
+                bar.update(done)
+                if step == nxt:
+                    output(step)
+        except KeyboardInterrupt:
+            status = "interrupted"
+            raise
+        finally:
+            bar.close()
+            jw.close()
+            if tw is not None:
+                tw.close()
+            if vw is not None:
+                vw.close()
+            wall = time.perf_counter() - wall0
+            summary = self._summary(st, rows, step, wall, compile_s, kernel_s, threads, status)
+            if var is not None:
+                var.write(self.out / VARIANCE_FILE)
+                summary["variance"] = var.summary()
+            write_json(self.out / "summary.json", summary)
+            self._write_particles(st)
+        return RunResult(self.out, summary)
+
+    # ------------------------------------------------------------------ outputs
+    def _write_particles(self, st):
+        """particles.parquet: one row per grain — class, axes (d), component spheres, volume
+        (d³), bed impacts, completed jumps (collisions/max_overlap 0: contacts off)."""
+        pd.DataFrame({
+            "particle": np.arange(self.n, dtype=np.int32),
+            "zingg_class": self.classes,
+            "class_id": self.class_id,
+            "subtype": np.array([g.subtype for g in self.composites], dtype=np.int8),
+            "Dl": self.axes[:, 0], "Di": self.axes[:, 1], "Ds": self.axes[:, 2],
+            "n_spheres": np.array([g.n_spheres for g in self.composites], dtype=np.int32),
+            "volume": np.array([g.volume for g in self.composites]),
+            "collisions": np.zeros(self.n, dtype=np.int64),
+            "bed_impacts": st.impacts.copy(),
+            "jumps": st.jump_count.copy(),
+            "max_overlap": np.zeros(self.n),
+        }).to_parquet(self.out / "particles.parquet", index=False)
+
+    def _transport(self, rows):
+        """q, q* of the run from tracks.parquet (analysis/transport.py) and Ackers–White."""
+        from .analysis.transport import ackers_white, bulk_velocity_plus, einstein_number, transport_rate
+
+        c = self.case
+        if not c.output.tracks:
+            return {"note": "output.tracks is off: no transport rate"}, None
+        tracks = pd.read_parquet(self.out / "tracks.parquet")
+        t_start = pd.read_parquet(self.out / "jumps.parquet", columns=["jump", "t_start"]) if rows else None
+        volumes = np.array([g.volume for g in self.composites])
+        lx, lz = self.domain_d
+        try:
+            tr = transport_rate(tracks, volumes, lx * lz, jumps=t_start, discarded=DISCARDED_JUMPS)
+        except ValueError as err:
+            return {"note": str(err)}, None
+        out = dict(tr)
+        out["q_star"] = einstein_number(tr["q_particle"], c.shields_number)
+        out["q_m2_s"] = tr["q_particle"] * c.shear_velocity * c.particle.diameter
+        out["definition"] = ("q = <sum_p V_p u_p>_t/(Lx Lz) (volume per unit width, samples at t >= t_from), "
+                             "q* = q/sqrt(R g d^3), d the nominal diameter; proportional to the number of "
+                             "grains per bed area")
+        by_class = {}
+        for name, cid in CLASS_IDS.items():
+            sel = self.class_id == cid
+            if sel.any():
+                sub = tracks[np.isin(tracks["particle"].to_numpy(), np.nonzero(sel)[0])]
+                t = transport_rate(sub, volumes, lx * lz, t_from=tr["t_from"])
+                by_class[name] = {"q_star": einstein_number(t["q_particle"], c.shields_number),
+                                  "u_volume_mean": t["u_volume_mean"]}
+        out["by_class"] = by_class
+        if c.flow.source == "les":
+            ub = bulk_velocity_plus(self.flow)
+            depth = self.flow.re_tau * c.viscous_length
+            aw = ackers_white(c.particle.diameter, u_star=c.shear_velocity, velocity=ub * c.shear_velocity,
+                              depth=depth, s=c.density_ratio, nu=c.fluid.viscosity)
+            aw.update(depth_m=depth, velocity_m_s=ub * c.shear_velocity, bulk_velocity_plus=ub,
+                      note="capacity (equilibrium) transport of an alluvial bed, Ackers & White 1973 with "
+                           "the 1993 coefficients; the run's q* is set by its number of grains")
+            out["ackers_white"] = aw
+            out["ratio_to_ackers_white"] = out["q_star"] / aw["q_star"] if aw["q_star"] > 0 else None
+        else:
+            out["ackers_white"] = None
+        return out, tracks
+
+    def _summary(self, st, rows, steps, wall, compile_s, kernel_s, threads, status):
+        c = self.case
+        jumps = np.concatenate(rows) if rows else np.zeros((0, 5))
+        duration_p = steps * self.dt
+        by_class = {}
+        for name, cid in CLASS_IDS.items():
+            grains = np.nonzero(self.class_id == cid)[0]
+            if len(grains):
+                by_class[name] = _stats(jumps[np.isin(jumps[:, 0], grains)] if len(jumps) else jumps)
+                by_class[name]["grains"] = int(len(grains))
+        impacts = int(st.impacts.sum())
+        n_comp = np.array([g.n_spheres for g in self.composites])
+        vol = np.array([g.volume for g in self.composites])
+        summary = {
+            "status": status,
+            "n_particles": self.n,
+            "concentration": c.concentration,
+            "domain_m": list(c.domain),
+            "tau_star": c.shields_number,
+            "tau_ratio": c.tau_ratio,
+            "shear_velocity_m_s": c.shear_velocity,
+            "re_star": self.re_star,
+            "rp": c.particle_reynolds,
+            "flow": {"source": c.flow.source,
+                     "dataset": str(self.flow.path) if self.flow.path else self.flow.meta.get("kind"),
+                     "re_tau": self.flow.re_tau, "top_d": self.top_d},
+            "dt_particle": self.dt,
+            "steps": steps,
+            "simulated_time_particle": duration_p,
+            "simulated_time_s": duration_p * c.time_scale,
+            "shape": {
+                "shape": c.particle.shape,
+                "fractions": c.particle.shape_fractions,
+                "nominal_diameter_m": c.particle.diameter,
+                "grains_per_class": {k: int((self.class_id == i).sum()) for k, i in CLASS_IDS.items()},
+                "component_spheres": int(n_comp.sum()),
+                "component_spheres_mean": float(n_comp.mean()),
+                "volume_mean_d3": float(vol.mean()),
+                "volume_sphere_d3": math.pi / 6.0,
+                "class_ids": CLASS_IDS,
+                "note": "lengths in the nominal diameter d = (Dl Di Ds)^(1/3); concentration counts "
+                        "(pi/6) d^3 per grain; grain-grain contacts off",
+            },
+            "jumps": _stats(jumps),
+            "jumps_by_class": by_class,
+            "collisions": {
+                "model": c.collisions.model, "bed_model": c.bed.model, "particle_particle": 0,
+                "bed": impacts, "per_particle": 0.0, "per_particle_per_unit_time": 0.0 if duration_p else None,
+                "bed_per_particle": impacts / self.n,
+                "bed_per_particle_per_unit_time": impacts / self.n / duration_p if duration_p else None,
+                "units": "per_particle: grain–grain collisions per grain (none: bonded-sphere runs have no "
+                         "grain–grain contacts); unit time = d/u*",
+            },
+            "steps_above_flow_top": int(st.above_top.sum()),
+            "timing": {"wall_s": wall, "compile_s": compile_s, "kernel_s": kernel_s, "free_flight_s": kernel_s,
+                       "bed_s": 0.0, "particle_collisions_s": 0.0, "threads": threads,
+                       "note": "bed rebounds are computed inside the free-flight kernel (clusters.step_grain)"},
+            "particle_steps_per_s": self.n * steps / kernel_s if kernel_s > 0 else None,
+            "component_sphere_steps_per_s": float(n_comp.sum()) * steps / kernel_s if kernel_s > 0 else None,
+        }
+        try:
+            summary["transport"], tracks = self._transport(rows)
+        except Exception as err:  # the run's outputs matter more than this derived block
+            summary["transport"], tracks = {"note": f"not computed: {type(err).__name__}: {err}"}, None
+        if tracks is not None and "t_from" in summary["transport"]:
+            summary["spin"] = spin_statistics(tracks, summary["transport"]["t_from"], self.class_id)
+        return summary
+
+
+def spin_statistics(tracks: pd.DataFrame, t_from: float, class_id=None) -> dict:
+    """Mean spanwise angular velocity ⟨Ω_z⟩ (negative: topspin) and mean |Ω| (u*/d) over
+    the track samples at t ≥ t_from; per Zingg class when class ids are given."""
+    tr = tracks[tracks["t"] >= t_from - 1e-12]
+
+    def block(t):
+        om = t[["spin_x", "spin_y", "spin_z"]].to_numpy()
+        return {"omega_z_mean": float(om[:, 2].mean()) if len(om) else None,
+                "omega_abs_mean": float(np.linalg.norm(om, axis=1).mean()) if len(om) else None}
+
+    out = block(tr)
+    out["units"] = "u*/d, world frame; samples at t >= t_from"
+    if class_id is not None:
+        cid = np.asarray(class_id)[tr["particle"].to_numpy()]
+        out["by_class"] = {k: block(tr[cid == i]) for k, i in CLASS_IDS.items() if np.any(cid == i)}
+    return out
