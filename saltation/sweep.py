@@ -65,8 +65,10 @@ RESULT_COLUMNS = {
     "U_mean": "mean grain velocity over a jump (u*)", "U_std": "(u*)",
     "collisions_pp": "particle–particle collisions (summary collisions.particle_particle)",
     "collisions_bed": "bed impacts",
-    "collisions_pp_per_particle": "particle–particle collisions per grain",
-    "collisions_pp_per_particle_per_s": "particle–particle collisions per grain per simulated second",
+    "collisions_pp_per_particle": "particle–particle collisions per grain, 2 × collisions_pp / N (each "
+                                  "collision involves two grains; summary collisions.per_particle)",
+    "collisions_pp_per_particle_per_unit_time": "the same per d/u* of simulated time",
+    "collisions_pp_per_particle_per_s": "the same per simulated second",
     "bed_impacts_per_particle_per_s": "bed impacts per grain per simulated second",
     "wall_s": "wall time of the run (s), all segments", "free_flight_s": "(s)", "bed_s": "(s)",
     "particle_collisions_s": "(s)", "compile_s": "(s)", "threads": "Numba threads",
@@ -282,6 +284,9 @@ def result_row(name: str, values: Mapping[str, Any], summary: Mapping[str, Any] 
     sim_s = summary.get("simulated_time_s") or 0.0
     pp = col.get("particle_particle")
     bed = col.get("bed")
+    # per grain: the summary's own figure (2 × events / N: a collision involves two grains)
+    per = col.get("per_particle", 2.0 * pp / n if pp is not None and n else None)
+    sim_p = summary.get("simulated_time_particle") or 0.0
     row.update(
         status=summary.get("status"),
         n_particles=n,
@@ -295,8 +300,9 @@ def result_row(name: str, values: Mapping[str, Any], summary: Mapping[str, Any] 
         U_mean=j.get("U_mean"), U_std=j.get("U_std"),
         collisions_pp=pp,
         collisions_bed=bed,
-        collisions_pp_per_particle=pp / n if pp is not None and n else None,
-        collisions_pp_per_particle_per_s=pp / n / sim_s if pp is not None and n and sim_s else None,
+        collisions_pp_per_particle=per,
+        collisions_pp_per_particle_per_unit_time=per / sim_p if per is not None and sim_p else None,
+        collisions_pp_per_particle_per_s=per / sim_s if per is not None and sim_s else None,
         bed_impacts_per_particle_per_s=bed / n / sim_s if bed is not None and n and sim_s else None,
         wall_s=tm.get("wall_s"),
         free_flight_s=tm.get("free_flight_s"),
@@ -329,7 +335,8 @@ def gather(sweep: Sweep, out: Path) -> pd.DataFrame:
 
 def format_table(df: pd.DataFrame) -> str:
     cols = [c for c in df.columns if c not in ("tau_star", "simulated_time_s", "compile_s", "threads",
-                                                "bed_impacts_per_particle_per_s")]
+                                                "bed_impacts_per_particle_per_s",
+                                                "collisions_pp_per_particle_per_unit_time")]
     fmt = {c: (lambda v: "" if v is None or (isinstance(v, float) and math.isnan(v)) else f"{v:.4g}")
            for c in cols if df[c].dtype.kind == "f"}
     return df[cols].to_string(index=False, formatters=fmt)

@@ -98,6 +98,7 @@ def test_sweep_runs_skips_finished_cases_and_resumes_interrupted_ones(tmp_path):
         assert row["n_particles"] == 8 and row["jumps"] == s["jumps"]["count"] > 0
         assert row["H_mean"] == s["jumps"]["H_mean"]
         assert row["bed_impacts_per_particle_per_s"] == pytest.approx(s["collisions"]["bed"] / 8 / s["simulated_time_s"])
+        assert row["collisions_pp_per_particle"] == s["collisions"]["per_particle"]
     # the stronger flow throws the grains further
     assert table.groupby("flow.tau_ratio")["L_mean"].mean().is_monotonic_increasing
 
