@@ -96,6 +96,7 @@ NOT_FINITE = 1
 JUMP_FIELDS = 4
 NX = 13  # x(3) v(3) q(4) Ω(3)
 SQRT_PI = math.sqrt(math.pi)
+SAME_IMPACT_DT = 1e-9  # d/u*: two bed impacts closer in time are one contact event
 
 
 class ClusterState(NamedTuple):
@@ -742,14 +743,18 @@ def _bed_impact(st, w, p, t, dt, y_old, y_new, bed, seed):
     t_hit = t + frac * dt
     low, kb = _lowest(st, w, p, x[0], x[1], x[2], x[6], x[7], x[8], x[9])
     x[1] -= low  # the lowest point exactly on the bed top at the hit
-    j = st.jump_buf_n[p]
-    if j < st.jump_buf.shape[1]:
-        st.jump_buf[p, j, 0] = st.jump_t0[p]
-        st.jump_buf[p, j, 1] = x[0] - st.jump_x0[p]
-        st.jump_buf[p, j, 2] = st.jump_ymax[p]
-        st.jump_buf[p, j, 3] = t_hit - st.jump_t0[p]
-        st.jump_buf_n[p] = j + 1
-    st.jump_count[p] += 1
+    # an impact at the instant of the previous one (a grazing contact closed at the end of
+    # one step, the crossing then found at the start of the next) is the same contact
+    # event: its impulse is applied, but it ends no jump (no zero-duration "jumps")
+    if st.impacts[p] == 0 or t_hit - st.jump_t0[p] > SAME_IMPACT_DT:
+        j = st.jump_buf_n[p]
+        if j < st.jump_buf.shape[1]:
+            st.jump_buf[p, j, 0] = st.jump_t0[p]
+            st.jump_buf[p, j, 1] = x[0] - st.jump_x0[p]
+            st.jump_buf[p, j, 2] = st.jump_ymax[p]
+            st.jump_buf[p, j, 3] = t_hit - st.jump_t0[p]
+            st.jump_buf_n[p] = j + 1
+        st.jump_count[p] += 1
     rot = w.rot[p]  # orientation at the hit (set by _lowest)
     rx = rot[0, 0] * st.r_body[kb, 0] + rot[0, 1] * st.r_body[kb, 1] + rot[0, 2] * st.r_body[kb, 2]
     ry = rot[1, 0] * st.r_body[kb, 0] + rot[1, 1] * st.r_body[kb, 1] + rot[1, 2] * st.r_body[kb, 2]
