@@ -128,6 +128,9 @@ def test_transport_rate_is_the_volume_flux_per_bed_area():
     q = transport_rate(tracks, [1.0, 2.0], 10.0, t_from=1.0)
     assert q["q_particle"] == pytest.approx(0.5) and q["samples"] == 2
     assert q["u_volume_mean"] == pytest.approx(5.0 / 3.0)
+    # one grain's share: its own flux, its own volume-weighted velocity
+    one = transport_rate(tracks[tracks["particle"] == 1], [1.0, 2.0], 10.0, t_from=1.0)
+    assert one["q_particle"] == pytest.approx(0.2) and one["u_volume_mean"] == pytest.approx(1.0)
     # twice the grains at the same velocities: twice the flux (q depends on N)
     both = pd.concat([tracks, tracks.assign(particle=tracks["particle"] + 2)])
     assert transport_rate(both, [1.0, 2.0, 1.0, 2.0], 10.0, t_from=1.0)["q_particle"] == pytest.approx(1.0)

@@ -141,18 +141,21 @@ def transport_rate(tracks: pd.DataFrame, volumes, area, *, t_from=None, jumps=No
     volumes in d³ indexed by particle; area: Lx·Lz in d². Samples at t ≥ t_from are
     averaged; t_from None: the median start of each grain's first counted jump (from
     ``jumps``), 0 without jumps. Returns dict(q_particle, t_from, samples, volume_total,
-    u_volume_mean) — u_volume_mean = ⟨Σ V u⟩/Σ V, the volume-weighted grain velocity (u*)."""
+    u_volume_mean) — volume_total = Σ V of the grains in ``tracks``, u_volume_mean =
+    ⟨Σ V u⟩/Σ V, their volume-weighted mean streamwise velocity (u*)."""
     vol = np.asarray(volumes, float)
     if t_from is None:
         t_from = _skip_time(jumps, discarded)
     tr = tracks[tracks["t"] >= t_from - 1e-12]
     if len(tr) == 0:
         raise ValueError(f"transport_rate: no track samples at t >= {t_from:.4g} d/u*; run longer")
-    flux = (vol[tr["particle"].to_numpy()] * tr["u"].to_numpy())
+    part = tr["particle"].to_numpy()
+    flux = vol[part] * tr["u"].to_numpy()
     per_t = pd.Series(flux).groupby(tr["t"].to_numpy()).sum()
     q = float(per_t.mean()) / float(area)
+    volume = float(vol[np.unique(part)].sum())  # of the grains in ``tracks`` (a class: its own)
     return {"q_particle": q, "t_from": float(t_from), "samples": int(len(per_t)),
-            "volume_total": float(vol.sum()), "u_volume_mean": float(per_t.mean()) / float(vol.sum()),
+            "volume_total": volume, "u_volume_mean": float(per_t.mean()) / volume,
             "units": "q_particle in u* d (volume per unit width); t_from in d/u*; volumes in d³"}
 
 
