@@ -44,47 +44,11 @@ import numba
 import numpy as np
 
 from saltation import contacts as C
-
-
-def write_lammps_data(path, pos, vel, spin, length):
-    with open(path, "w") as fh:
-        fh.write(f"saltation granular gas\n\n{len(pos)} atoms\n1 atom types\n\n")
-        for a in "xyz":
-            fh.write(f"0 {float(length)!r} {a}lo {a}hi\n")
-        fh.write("\nAtoms # sphere\n\n")
-        dens = repr(6.0 / math.pi)
-        for i, p in enumerate(pos):
-            fh.write(f"{i + 1} 1 1.0 {dens} {float(p[0])!r} {float(p[1])!r} {float(p[2])!r}\n")
-        fh.write("\nVelocities\n\n")
-        for i, (v, w) in enumerate(zip(vel, spin)):
-            fh.write(f"{i + 1} " + " ".join(repr(float(x)) for x in (*v, *w)) + "\n")
-
-
-def lammps_input(model, dt, steps, skin):
-    dampflag = 1 if model.gamma_t > 0.0 else 0
-    return f"""units lj
-atom_style sphere
-atom_modify map array
-boundary p p p
-comm_modify vel yes
-read_data data.gas
-set group all mass 1.0
-pair_style gran/hooke/history {model.kn!r} {model.kt!r} {model.gamma_n!r} {model.gamma_t!r} {model.friction!r} {dampflag}
-pair_coeff * *
-neighbor {skin!r} bin
-neigh_modify delay 0 every 1 check yes
-fix integrate all nve/sphere
-timestep {dt!r}
-compute rke all erotate/sphere
-thermo_style custom step ke c_rke
-thermo_modify norm no format float %.17g
-thermo {steps}
-run {steps}
-"""
+from saltation.lammps_gas import gas_input, write_gas_data
 
 
 def run_lammps(lmp, workdir, model, dt, steps, skin):
-    (workdir / "in.gas").write_text(lammps_input(model, dt, steps, skin))
+    (workdir / "in.gas").write_text(gas_input(model, dt, steps, steps, skin))
     env = {**os.environ, "OMP_NUM_THREADS": "1"}
     t0 = time.perf_counter()
     subprocess.run([lmp, "-in", "in.gas", "-log", "log.gas", "-screen", "none"], cwd=workdir, check=True, env=env)
@@ -140,7 +104,7 @@ def main():
     else:
         work = Path(args.keep) if args.keep else Path(tempfile.mkdtemp(prefix="bench_lammps_"))
         work.mkdir(parents=True, exist_ok=True)
-        write_lammps_data(work / "data.gas", pos0, vel0, spin0, length)
+        write_gas_data(work / "data.gas", pos0, vel0, spin0, length)
         res = run_lammps(lmp, work, model, dt, args.steps, args.skin)
         res["particle_steps_per_s"] = round(n * args.steps / res["loop_s"])
         if res["cpu_use_percent"]:

@@ -36,6 +36,7 @@ import numpy as np
 import pytest
 
 from saltation import contacts as C
+from saltation.lammps_gas import gas_input, write_gas_data
 
 pytestmark = [
     pytest.mark.lammps,
@@ -54,42 +55,9 @@ RECORDS = 30
 SEEDS = (11, 12, 13)
 
 
-def write_lammps_data(path, pos, vel, spin, length):
-    lines = ["saltation granular gas", "", f"{len(pos)} atoms", "1 atom types", ""]
-    lines += [f"0 {float(length)!r} {a}lo {a}hi" for a in "xyz"]
-    lines += ["", "Atoms # sphere", ""]
-    lines += [f"{i + 1} 1 1.0 {6.0 / math.pi!r} " + " ".join(repr(float(x)) for x in p) for i, p in enumerate(pos)]
-    lines += ["", "Velocities", ""]
-    lines += [f"{i + 1} " + " ".join(repr(float(x)) for x in (*v, *w)) for i, (v, w) in enumerate(zip(vel, spin))]
-    path.write_text("\n".join(lines) + "\n")
-
-
-def lammps_input(model, dt, n_steps, every, skin):
-    dampflag = 1 if model.gamma_t > 0.0 else 0
-    return f"""units lj
-atom_style sphere
-atom_modify map array
-boundary p p p
-comm_modify vel yes
-read_data data.gas
-set group all mass 1.0
-pair_style gran/hooke/history {model.kn!r} {model.kt!r} {model.gamma_n!r} {model.gamma_t!r} {model.friction!r} {dampflag}
-pair_coeff * *
-neighbor {skin!r} bin
-neigh_modify delay 0 every 1 check yes
-fix integrate all nve/sphere
-timestep {dt!r}
-compute rke all erotate/sphere
-thermo_style custom step ke c_rke
-thermo_modify norm no format float %.17g
-thermo {every}
-run {n_steps}
-"""
-
-
 def run_lammps(workdir, model, dt, n_steps, every, skin):
     """Run ``lmp`` in workdir (data.gas there); returns rows (step, KE_trans, KE_rot)."""
-    (workdir / "in.gas").write_text(lammps_input(model, dt, n_steps, every, skin))
+    (workdir / "in.gas").write_text(gas_input(model, dt, n_steps, every, skin))
     subprocess.run(["lmp", "-in", "in.gas", "-log", "log.gas", "-screen", "none"], cwd=workdir, check=True,
                    timeout=300)
     rows, on = [], False
@@ -117,7 +85,7 @@ def cooling(tmp_path_factory):
         pos, vel, _ = C.random_gas(N, (length,) * 3, seed=seed, speed=1.0)
         spin = np.random.default_rng(seed).normal(0.0, 1.0, (N, 3))
         work = tmp_path_factory.mktemp(f"lammps{seed}")
-        write_lammps_data(work / "data.gas", pos, vel, spin, length)
+        write_gas_data(work / "data.gas", pos, vel, spin, length)
         rows = run_lammps(work, model_lammps, dt, n_steps, every, SKIN)
         assert rows.shape == (RECORDS + 1, 3) and np.array_equal(rows[:, 0], every * np.arange(RECORDS + 1))
         out["lammps"].append(rows[:, 1] + rows[:, 2])
