@@ -1,0 +1,979 @@
+"""Grain–grain contacts between bonded-sphere grains (SPEC §5 on composites; issue 6
+item 2): soft contacts between the component spheres of *different* grains, summed into
+each grain's force and torque, sub-stepped inside the hydrodynamic step.
+
+Units: those of clusters.py (length Dn, velocity u*, time Dn/u*, mass ρ Dn³ with ρ the
+fluid density, force ρ u*² Dn², torque ρ u*² Dn³). The rigid mass of grain i is
+m_i = (1+R) V_i (``ClusterState.mass``), its rigid inertia I_i (body frame).
+
+Contact law (per pair of component spheres a ∈ grain i, b ∈ grain j ≠ i)
+-----------------------------------------------------------------------
+Centres x_a, x_b (minimum image in x and z), r = |x_a − x_b|, n = (x_a − x_b)/r,
+overlap δ = (d_a + d_b)/2 − r > 0. Contact point: the middle of the overlap,
+x_c = x_a − (d_a/2 − δ/2) n (= x_b + (d_b/2 − δ/2) n); for two unit spheres this is the
+midpoint of contacts.py's LEVER_CONTACT_POINT. The same point serves both grains, so the
+force pair has no net moment and the total angular momentum (orbital + spin) is
+conserved to round-off.
+
+- contact-point velocities u_i = v_i + Ω_i × (x_c − x_i), u_j likewise; v_r = u_i − u_j,
+  v_n = v_r·n, v_t = v_r − v_n n;
+- normal force on i (linear spring–dashpot, Cundall & Strack 1979, no clamping as in
+  contacts.py): F_n = (k_n δ − c_n v_n) n with c_n = 2 √(m_eff k_n) |ln e| / √(ln² e + π²),
+  m_eff = m_i m_j / (m_i + m_j) the grains' reduced rigid mass (contacts.normal_damping
+  written for a pair of unequal grains). A central impact then rebounds with exactly the
+  case's e; an off-centre one feels a smaller point-effective mass (rotation) and
+  rebounds a little more elastically — the usual choice for clumped-sphere DEM;
+- tangential spring (history per component pair, as contacts.py / LAMMPS
+  gran/hooke/history): ξ ← ξ + v_t h, ξ ← ξ − (ξ·n) n, F_t = −k_t ξ; Coulomb limit
+  |F_t| ≤ f |F_n| (F_t scaled to it and ξ = −F_t/k_t);
+- on grain i: F += F_n + F_t, T += (x_c − x_i) × (F_n + F_t); on j the negatives.
+
+k_n, k_t, e and f are the case's [collisions] values, the same as the sphere runs
+(contacts.contact_model_from_case): k_n(ρ u*² units) = k_n(sphere units) · (1+R) π/6,
+because the sphere code's mass unit is the grain mass ρp (π/6) d³ = (1+R)(π/6) ρ d³. A
+one-sphere composite of d = Dn is therefore the sphere contact exactly.
+
+Sub-steps: n_sub = ⌈steps_per_contact · Δt / t_c,min⌉ with t_c,min = π √(μ_min / k_n)
+the shortest (undamped) contact of the run: μ_min is half the smallest point-effective
+mass 1/(1/m + (c×n)·I⁻¹(c×n)) over the grains, their component surface points c and
+directions n (200 directions; ``substeps``). That is the worst case — a tip of the
+lightest rod hit sideways — so typical contacts get more sub-steps than asked for.
+
+Scheme inside the hydrodynamic step (operator split after the free flight, as collide.py)
+-----------------------------------------------------------------------------------------
+1. Free flight (clusters.step_grain, RK4 + the virtual bed) takes every grain from its
+   start state (x₀, v₀, q₀, Ω₀) (``ClusterWork.x0``) to (x₁, v₁, q₁, Ω₁).
+2. **Engagement**: with D_i = |x₁ − x₀| + Δt(|v₀ − ū| + |v₁ − ū|)/4 a bound on how far the
+   centre's free path (cubic Hermite, below) gets from x₀, and ρ_i the grain's bounding
+   radius (max |r_k| + d_k/2), grains i and j can touch in the step only if
+   |x₀ᵢ − x₀ⱼ| < ρ_i + ρ_j + D_i + D_j + s (s: the skin, a margin for contact-deflected
+   paths). Found through a cell list of the grains; those grains are *active*.
+3. The active grains are moved again through the step in n_sub sub-steps h = Δt/n_sub
+   as **deviations from their free-flight path**: centre x = H(σ) + δx, velocity
+   H'(σ)/Δt + δv (H the Hermite cubic through (x₀, v₀), (x₁, v₁), σ = t/Δt), orientation
+   Q = q_f(σ) ⊗ δq (q_f the slerp from q₀ to q₁, δq a body-frame rotation), angular
+   velocity Ω_f(σ) + δΩ (Ω_f linear from Ω₀ to Ω₁), with δΩ = I_w(Q)⁻¹ δL and
+   dδv/dt = F_c/m, dδL/dt = T_c, dδq/dt = ½ (R_fᵀ δΩ) ⊗ δq (exact kinematics for the
+   composition Q = q_f ⊗ δq), dδx/dt = δv. Velocity Verlet in LAMMPS order (half kick,
+   drift, contact forces at the half-kicked velocities, half kick), a set-up force
+   evaluation at σ = 0 that does not advance ξ. The fluid force and torque act as in
+   free flight (held over the step); the contact acts on the rigid mass and rigid
+   inertia (no added mass: as the bed rebound, clusters.py, and the sphere contacts).
+   Integrating δL (world frame) rather than δΩ makes the kicks conserve total angular
+   momentum exactly; the gyroscopic change of the free rotation is in the RK4 path.
+   Component candidates come from a neighbour list of the active grains' component
+   spheres, built at σ = 0 through a cell list (cells ≥ d_max + 2 m_max + s, periodic in
+   x and z, clamped in y like cells.py) with the pair cutoff (d_a + d_b)/2 + m_a + m_b + s,
+   m_a = D_i + |r_a| φ_i the reach of component a (φ_i the slerp angle). A grain whose
+   deviation (|δx| + ρ_i ∫|δΩ| dt) exceeds s/2 is counted in ``overruns`` and the list is
+   rebuilt at the current sub-step (history carried over by partner id).
+4. A grain that touched another one gets (x₁ + δx, v₁ + δv, q₁ ⊗ δq, Ω₁ + I_w⁻¹ δL), its
+   fluid re-sampled and its Basset history restarted (as collide.py and a bed impact:
+   a contact is an impulsive velocity change). The others keep the RK4 result bit for
+   bit.
+
+Known gaps: the bed is not part of the sub-steps (the free flight has already applied
+the rebound; a grain pushed below the bed top by a contact is lifted back by the next
+free-flight step); a grain deflected by more than the engagement margin s towards a
+grain that was not active is not stopped (``overruns`` counts the steps where that was
+possible; ``missed_contacts`` — brute-force check at the end of such a step — the pairs
+in contact that the list did not hold).
+
+Statistics (per grain, race-free): grain–grain collisions begun (a pair of grains that
+goes from no touching component pair to at least one; Σ/2 = collisions), the largest
+component overlap (in Dn), Σ overlap and Σ sub-steps over component contacts (time-mean
+overlap).
+"""
+from __future__ import annotations
+
+import math
+import time
+from typing import NamedTuple
+
+import numpy as np
+from numba import njit, objmode, prange
+
+from .clusters import OK, _quat_to_matrix, step_grain
+from .history import META_COUNT
+
+__all__ = ["ClusterContacts", "make_cluster_contacts", "contact_parameters", "substeps", "contact_phase",
+           "advance_clusters_contacts", "component_forces", "brute_force_pairs", "listed_pairs",
+           "point_effective_masses", "DEFAULT_SKIN"]
+
+PARTNERS = 16  # grains one grain can touch at once (statistics; more are not counted as new)
+DEFAULT_SKIN = 0.3  # Dn: engagement margin and list skin when the case gives none
+N_COUNTERS = 4  # list builds, overruns, grain-substeps, engaged grain-steps
+
+
+class ClusterContacts(NamedTuple):
+    """Contact state of a run of composites (module docstring); K components, N grains."""
+    par: np.ndarray  # (8,) k_n, k_t, ζ = 2|ln e|/√(ln²e+π²), f, skin, Lx, Ly, Lz
+    grain_of: np.ndarray  # (K,) int64
+    rho: np.ndarray  # (N,) bounding radius (Dn)
+    rnorm: np.ndarray  # (K,) |r_k| (Dn)
+    nbr: np.ndarray  # (K, C) int64 partner components
+    nbr_count: np.ndarray  # (K,) int64
+    shear: np.ndarray  # (K, C, 3) tangential spring ξ
+    nbr2: np.ndarray  # spare buffers for the next build
+    nbr_count2: np.ndarray
+    shear2: np.ndarray
+    partners: np.ndarray  # (N, P) int64 grains touched at the last evaluation
+    n_partners: np.ndarray  # (N,) int64
+    new_partners: np.ndarray  # (N, P) scratch
+    active: np.ndarray  # (N,) uint8
+    act: np.ndarray  # (N,) int64 active ids, n_act[0] of them
+    n_act: np.ndarray  # (1,) int64
+    touched: np.ndarray  # (N,) uint8: had a contact in this step
+    reach: np.ndarray  # (N,) D_i
+    phi: np.ndarray  # (N,) slerp angle of the step
+    x1: np.ndarray  # (N, 13) end of the free flight
+    dx: np.ndarray  # (N, 3) deviations
+    dv: np.ndarray  # (N, 3)
+    dL: np.ndarray  # (N, 3)
+    dq: np.ndarray  # (N, 4)
+    dev: np.ndarray  # (N,) deviation bound since the last list build
+    P: np.ndarray  # (N, 3) pose at the current sub-step
+    V: np.ndarray  # (N, 3)
+    Om: np.ndarray  # (N, 3)
+    rot: np.ndarray  # (N, 3, 3)
+    iw: np.ndarray  # (N, 3, 3) world inverse rigid inertia
+    cp: np.ndarray  # (K, 3) world component centres
+    force: np.ndarray  # (N, 3) contact force
+    torque: np.ndarray  # (N, 3) contact torque about the centre of mass
+    collisions: np.ndarray  # (N,) int64 grain–grain collisions begun
+    max_overlap: np.ndarray  # (N,) largest component overlap (Dn)
+    overlap_sum: np.ndarray  # (N,) Σ overlap over component-contact sub-steps
+    contact_substeps: np.ndarray  # (N,) int64 Σ component-contact sub-steps
+    counters: np.ndarray  # (N_COUNTERS,) int64
+
+
+def point_effective_masses(st, n_dir: int = 200) -> np.ndarray:
+    """Smallest point-effective mass 1/(1/m + (c×n)·I⁻¹(c×n)) of each grain over its
+    component surface points c = r_k + (d_k/2) n and n_dir directions n (ρ Dn³)."""
+    k = np.arange(n_dir) + 0.5
+    th = np.arccos(1.0 - 2.0 * k / n_dir)
+    ph = math.pi * (1.0 + 5.0**0.5) * k
+    dirs = np.column_stack([np.cos(ph) * np.sin(th), np.sin(ph) * np.sin(th), np.cos(th)])
+    out = np.zeros(len(st.mass))
+    for p in range(len(st.mass)):
+        a, b = st.cstart[p], st.cstart[p + 1]
+        c = st.r_body[a:b, None, :] + 0.5 * st.d_comp[a:b, None, None] * dirs[None, :, :]
+        cn = np.cross(c, dirs[None, :, :])
+        q = np.einsum("kni,ij,knj->kn", cn, st.inertia_inv[p], cn)
+        out[p] = 1.0 / (1.0 / st.mass[p] + q.max())
+    return out
+
+
+def damping_factor(restitution: float) -> float:
+    """ζ with c_n = ζ √(m_eff k_n) giving restitution e (contacts.normal_damping)."""
+    if not 0.0 < restitution <= 1.0:
+        raise ValueError(f"restitution {restitution!r} must be in (0, 1] for a spring–dashpot")
+    le = math.log(restitution)
+    return 2.0 * abs(le) / math.sqrt(le * le + math.pi**2)
+
+
+def contact_parameters(kn, restitution, friction, kt_ratio=2.0 / 7.0, skin=DEFAULT_SKIN, box=(1e6, 60.0, 1e6)):
+    """The ``par`` array (k_n, k_t in ρ u*² units; box (Lx, Ly, Lz) in Dn, x, z periodic)."""
+    if kn <= 0.0 or friction < 0.0 or kt_ratio < 0.0 or skin <= 0.0:
+        raise ValueError("kn and skin must be positive; friction and kt_ratio non-negative")
+    return np.array([kn, kt_ratio * kn, damping_factor(restitution), friction, skin, *map(float, box)])
+
+
+def substeps(st, kn: float, dt: float, steps_per_contact: int = 20) -> int:
+    """Sub-steps per hydrodynamic step so that the shortest contact of the run (two of
+    the lightest point-effective masses, undamped) spans ≥ steps_per_contact."""
+    mu = point_effective_masses(st).min()
+    tc = math.pi * math.sqrt(0.5 * mu / kn)
+    return max(1, math.ceil(steps_per_contact * dt / tc - 1e-9))
+
+
+def make_cluster_contacts(st, par, capacity: int = 32) -> ClusterContacts:
+    """Contact state for a ClusterState ``st`` (clusters.make_cluster_state)."""
+    n = st.pos.shape[0]
+    kt = st.r_body.shape[0]
+    grain_of = np.repeat(np.arange(n), np.diff(st.cstart)).astype(np.int64)
+    rnorm = np.linalg.norm(st.r_body, axis=1)
+    rho = np.array([(rnorm[a:b] + 0.5 * st.d_comp[a:b]).max() for a, b in zip(st.cstart[:-1], st.cstart[1:])])
+    par = np.asarray(par, dtype=np.float64)
+    lx, lz = par[5], par[7]
+    need = 2.0 * (st.d_comp.max() + par[4])
+    if n > 1 and min(lx, lz) < 2.0 * need:
+        raise ValueError(f"the particle domain {lx:.4g} × {lz:.4g} Dn is too small for grain–grain contacts "
+                         f"of components up to {st.d_comp.max():.3g} Dn with skin {par[4]:.3g} Dn "
+                         f"(needs ≥ {2 * need:.4g} Dn in x and z)")
+    c = max(1, int(capacity))
+    z3 = lambda m: np.zeros((m, 3))  # noqa: E731
+    return ClusterContacts(
+        par, grain_of, rho, rnorm,
+        np.zeros((kt, c), np.int64), np.zeros(kt, np.int64), np.zeros((kt, c, 3)),
+        np.zeros((kt, c), np.int64), np.zeros(kt, np.int64), np.zeros((kt, c, 3)),
+        np.zeros((n, PARTNERS), np.int64), np.zeros(n, np.int64), np.zeros((n, PARTNERS), np.int64),
+        np.zeros(n, np.uint8), np.zeros(n, np.int64), np.zeros(1, np.int64), np.zeros(n, np.uint8),
+        np.zeros(n), np.zeros(n), np.zeros((n, 13)), z3(n), z3(n), z3(n), np.zeros((n, 4)), np.zeros(n),
+        z3(n), z3(n), z3(n), np.zeros((n, 3, 3)), np.zeros((n, 3, 3)), z3(kt), z3(n), z3(n),
+        np.zeros(n, np.int64), np.zeros(n), np.zeros(n), np.zeros(n, np.int64), np.zeros(N_COUNTERS, np.int64))
+
+
+# ----------------------------------------------------------------------------- small kernels
+@njit(cache=True, inline="always")
+def _min_image(dx, length):
+    return dx - length * math.floor(dx / length + 0.5)
+
+
+@njit(cache=True, inline="always")
+def _axis_cell(x, n, size, length, periodic):
+    if periodic:
+        s = x - length * math.floor(x / length)
+        k = int(s / size)
+    else:
+        k = int(math.floor(x / size)) if x > 0.0 else 0
+    if k >= n:
+        k = n - 1
+    if k < 0:
+        k = 0
+    return k
+
+
+@njit(cache=True, inline="always")
+def _layer(k, n, periodic, s):
+    """s-th (0..2) neighbouring layer of layer k, or −1 when it does not exist or
+    repeats one already given (an axis of one or two layers)."""
+    if periodic:
+        if n >= 3:
+            return (k + s - 1) % n
+        if s < n:
+            return s
+        return -1
+    j = k + s - 1
+    if j < 0 or j >= n:
+        return -1
+    return j
+
+
+@njit(cache=True, inline="always")
+def _qmul(a0, a1, a2, a3, b0, b1, b2, b3):
+    return (a0 * b0 - a1 * b1 - a2 * b2 - a3 * b3, a0 * b1 + a1 * b0 + a2 * b3 - a3 * b2,
+            a0 * b2 - a1 * b3 + a2 * b0 + a3 * b1, a0 * b3 + a1 * b2 - a2 * b1 + a3 * b0)
+
+
+@njit(cache=True)
+def _grid(box, cut):
+    """Cells per axis (3,) int64 and their edges (3,) for a cutoff ``cut`` (≥ 1 cell)."""
+    n = np.empty(3, np.int64)
+    size = np.empty(3)
+    for a in range(3):
+        n[a] = max(1, int(math.floor(box[a] / cut)))
+        size[a] = box[a] / n[a]
+    return n, size
+
+
+@njit(cache=True)
+def _sort(pos, ids, box, n, size, periodic_y):
+    """Counting sort of the points pos[ids] into cells: (cell_start, cell_count, order)
+    with order holding positions into ``ids``. Stable (ids order within a cell)."""
+    nc = n[0] * n[1] * n[2]
+    count = np.zeros(nc, np.int64)
+    start = np.zeros(nc, np.int64)
+    cell = np.empty(ids.shape[0], np.int64)
+    for q in range(ids.shape[0]):
+        i = ids[q]
+        ix = _axis_cell(pos[i, 0], n[0], size[0], box[0], True)
+        iy = _axis_cell(pos[i, 1], n[1], size[1], box[1], periodic_y)
+        iz = _axis_cell(pos[i, 2], n[2], size[2], box[2], True)
+        c = (ix * n[1] + iy) * n[2] + iz
+        cell[q] = c
+        count[c] += 1
+    run = 0
+    for c in range(nc):
+        start[c] = run
+        run += count[c]
+    order = np.empty(ids.shape[0], np.int64)
+    for q in range(ids.shape[0]):
+        c = cell[q]
+        order[start[c]] = q
+        start[c] += 1
+    for c in range(nc):
+        start[c] -= count[c]
+    return start, count, order, cell
+
+
+# ----------------------------------------------------------------------------- engagement
+@njit(cache=True, parallel=True)
+def _reach(st, w, cc, dt):
+    """D_i (Hermite path bound) and the slerp angle φ_i of every grain; x1 saved.
+    (Parallel bodies are separate functions: writes through a NamedTuple's attribute
+    directly in a prange body can be lost.)"""
+    for p in prange(st.pos.shape[0]):
+        _reach_one(st, w, cc, p, dt)
+
+
+@njit(cache=True)
+def _reach_one(st, w, cc, p, dt):
+    x0 = w.x0[p]
+    x1 = cc.x1[p]
+    for i in range(3):
+        x1[i] = st.pos[p, i]
+        x1[3 + i] = st.vel[p, i]
+        x1[10 + i] = st.omega[p, i]
+    for i in range(4):
+        x1[6 + i] = st.quat[p, i]
+    chord = 0.0
+    b0 = 0.0
+    b1 = 0.0
+    for i in range(3):
+        d = x1[i] - x0[i]
+        chord += d * d
+    chord = math.sqrt(chord)
+    for i in range(3):
+        ub = (x1[i] - x0[i]) / dt
+        b0 += (x0[3 + i] - ub) ** 2
+        b1 += (x1[3 + i] - ub) ** 2
+    cc.reach[p] = chord + 0.25 * dt * (math.sqrt(b0) + math.sqrt(b1))
+    dot = abs(x0[6] * x1[6] + x0[7] * x1[7] + x0[8] * x1[8] + x0[9] * x1[9])
+    cc.phi[p] = 2.0 * math.acos(min(1.0, dot))
+
+
+@njit(cache=True, parallel=True)
+def _engage_pass(pos, ok, rho, reach, skin, box, n, size, start, count, order, ids, active):
+    for q in prange(ids.shape[0]):
+        i = ids[q]
+        ix = _axis_cell(pos[i, 0], n[0], size[0], box[0], True)
+        iy = _axis_cell(pos[i, 1], n[1], size[1], box[1], False)
+        iz = _axis_cell(pos[i, 2], n[2], size[2], box[2], True)
+        hit = 0
+        for sx in range(3):
+            cx = _layer(ix, n[0], True, sx)
+            if cx < 0:
+                continue
+            for sy in range(3):
+                cy = _layer(iy, n[1], False, sy)
+                if cy < 0:
+                    continue
+                for sz in range(3):
+                    cz = _layer(iz, n[2], True, sz)
+                    if cz < 0:
+                        continue
+                    c = (cx * n[1] + cy) * n[2] + cz
+                    for m in range(start[c], start[c] + count[c]):
+                        j = ids[order[m]]
+                        if j == i:
+                            continue
+                        dx = _min_image(pos[i, 0] - pos[j, 0], box[0])
+                        dy = pos[i, 1] - pos[j, 1]
+                        dz = _min_image(pos[i, 2] - pos[j, 2], box[2])
+                        lim = rho[i] + rho[j] + reach[i] + reach[j] + skin
+                        if dx * dx + dy * dy + dz * dz < lim * lim:
+                            hit = 1
+                            break
+                    if hit:
+                        break
+                if hit:
+                    break
+            if hit:
+                break
+        active[i] = hit
+
+
+@njit(cache=True)
+def _engage(st, w, cc):
+    """Mark the active grains (module docstring, step 2) and list them in cc.act."""
+    n = st.pos.shape[0]
+    box = cc.par[5:8]
+    skin = cc.par[4]
+    m = 0
+    for p in range(n):
+        if st.status[p] == OK:
+            m += 1
+    ids = np.empty(m, np.int64)
+    m = 0
+    rmax = 0.0
+    dmax = 0.0
+    for p in range(n):
+        if st.status[p] == OK:
+            ids[m] = p
+            m += 1
+            rmax = max(rmax, cc.rho[p])
+            dmax = max(dmax, cc.reach[p])
+    cut = min(2.0 * (rmax + dmax) + skin, 0.5 * min(box[0], box[2]))
+    pos = w.x0[:, 0:3]
+    gn, size = _grid(box, cut)
+    start, count, order, _ = _sort(pos, ids, box, gn, size, False)
+    cc.active[:] = 0
+    if 2.0 * (rmax + dmax) + skin > 0.5 * min(box[0], box[2]):
+        cc.counters[1] += 1  # cells capped at half the box: counted as an overrun
+    _engage_pass(pos, st.status, cc.rho, cc.reach, skin, box, gn, size, start, count, order, ids, cc.active)
+    k = 0
+    for p in range(n):
+        if cc.active[p]:
+            cc.act[k] = p
+            k += 1
+    cc.n_act[0] = k
+    return k
+
+
+# ----------------------------------------------------------------------------- neighbour list
+@njit(cache=True, parallel=True)
+def _list_pass(cp, comps, grain_of, dcomp, creach, skin, box, n, size, start, count, order, nbr, cnt):
+    cap = nbr.shape[1]
+    most = np.zeros(comps.shape[0], np.int64)
+    for q in prange(comps.shape[0]):
+        a = comps[q]
+        ga = grain_of[a]
+        ix = _axis_cell(cp[a, 0], n[0], size[0], box[0], True)
+        iy = _axis_cell(cp[a, 1], n[1], size[1], box[1], False)
+        iz = _axis_cell(cp[a, 2], n[2], size[2], box[2], True)
+        k = 0
+        for sx in range(3):
+            cx = _layer(ix, n[0], True, sx)
+            if cx < 0:
+                continue
+            for sy in range(3):
+                cy = _layer(iy, n[1], False, sy)
+                if cy < 0:
+                    continue
+                for sz in range(3):
+                    cz = _layer(iz, n[2], True, sz)
+                    if cz < 0:
+                        continue
+                    c = (cx * n[1] + cy) * n[2] + cz
+                    for m in range(start[c], start[c] + count[c]):
+                        b = comps[order[m]]
+                        if grain_of[b] == ga:
+                            continue
+                        dx = _min_image(cp[a, 0] - cp[b, 0], box[0])
+                        dy = cp[a, 1] - cp[b, 1]
+                        dz = _min_image(cp[a, 2] - cp[b, 2], box[2])
+                        lim = 0.5 * (dcomp[a] + dcomp[b]) + creach[a] + creach[b] + skin
+                        if dx * dx + dy * dy + dz * dz < lim * lim:
+                            if k < cap:
+                                nbr[a, k] = b
+                            k += 1
+        cnt[a] = k
+        most[q] = k
+    return most.max() if comps.shape[0] > 0 else 0
+
+
+@njit(cache=True, parallel=True)
+def _transfer(comps, nbr, cnt, shear, nbr2, cnt2, shear2):
+    for q in prange(comps.shape[0]):
+        a = comps[q]
+        for k in range(cnt2[a]):
+            b = nbr2[a, k]
+            shear2[a, k, 0] = 0.0
+            shear2[a, k, 1] = 0.0
+            shear2[a, k, 2] = 0.0
+            for m in range(cnt[a]):
+                if nbr[a, m] == b:
+                    shear2[a, k, 0] = shear[a, m, 0]
+                    shear2[a, k, 1] = shear[a, m, 1]
+                    shear2[a, k, 2] = shear[a, m, 2]
+                    break
+
+
+@njit(cache=True)
+def _build_list(st, cc):
+    """Neighbour list of the active grains' components at their current centres cc.cp,
+    history carried over; returns the ClusterContacts to use from now on."""
+    na = cc.n_act[0]
+    m = 0
+    for q in range(na):
+        p = cc.act[q]
+        m += st.cstart[p + 1] - st.cstart[p]
+    comps = np.empty(m, np.int64)
+    creach = np.zeros(cc.grain_of.shape[0])
+    m = 0
+    rmax = 0.0
+    for q in range(na):
+        p = cc.act[q]
+        for a in range(st.cstart[p], st.cstart[p + 1]):
+            comps[m] = a
+            m += 1
+            creach[a] = cc.reach[p] + cc.rnorm[a] * cc.phi[p]
+            rmax = max(rmax, creach[a])
+    box = cc.par[5:8]
+    skin = cc.par[4]
+    dmax = st.d_comp.max()
+    cut = dmax + 2.0 * rmax + skin
+    if cut > 0.5 * min(box[0], box[2]):
+        cut = 0.5 * min(box[0], box[2])
+        cc.counters[1] += 1
+    gn, size = _grid(box, cut)
+    start, count, order, _ = _sort(cc.cp, comps, box, gn, size, False)
+    nbr2, cnt2, shear2 = cc.nbr2, cc.nbr_count2, cc.shear2
+    most = _list_pass(cc.cp, comps, cc.grain_of, st.d_comp, creach, skin, box, gn, size, start, count, order,
+                      nbr2, cnt2)
+    spare_nbr, spare_cnt, spare_shear = cc.nbr, cc.nbr_count, cc.shear
+    if most > nbr2.shape[1]:
+        k = most + most // 4 + 4
+        kt = cc.grain_of.shape[0]
+        nbr2 = np.zeros((kt, k), np.int64)
+        cnt2 = np.zeros(kt, np.int64)
+        shear2 = np.zeros((kt, k, 3))
+        _list_pass(cc.cp, comps, cc.grain_of, st.d_comp, creach, skin, box, gn, size, start, count, order,
+                   nbr2, cnt2)
+        spare_nbr = np.zeros((kt, k), np.int64)
+        spare_cnt = np.zeros(kt, np.int64)
+        spare_shear = np.zeros((kt, k, 3))
+    _transfer(comps, cc.nbr, cc.nbr_count, cc.shear, nbr2, cnt2, shear2)
+    # rows of components not in the new list (inactive grains): empty
+    spare_cnt[:] = 0
+    keep = np.zeros(cc.grain_of.shape[0], np.uint8)
+    for q in range(m):
+        keep[comps[q]] = 1
+    for a in range(keep.shape[0]):
+        if keep[a] == 0:
+            cnt2[a] = 0
+    cc.counters[0] += 1
+    for q in range(na):
+        cc.dev[cc.act[q]] = 0.0
+    return ClusterContacts(cc.par, cc.grain_of, cc.rho, cc.rnorm, nbr2, cnt2, shear2, spare_nbr, spare_cnt,
+                           spare_shear, cc.partners, cc.n_partners, cc.new_partners, cc.active, cc.act, cc.n_act,
+                           cc.touched, cc.reach, cc.phi, cc.x1, cc.dx, cc.dv, cc.dL, cc.dq, cc.dev, cc.P, cc.V,
+                           cc.Om, cc.rot, cc.iw, cc.cp, cc.force, cc.torque, cc.collisions, cc.max_overlap,
+                           cc.overlap_sum, cc.contact_substeps, cc.counters)
+
+
+# ----------------------------------------------------------------------------- poses and forces
+@njit(cache=True, parallel=True)
+def _poses(st, w, cc, s, dt):
+    """Pose of every active grain at σ = s on its free path plus deviation, its world
+    inverse inertia and its components' world centres."""
+    for q in prange(cc.n_act[0]):
+        _pose_one(st, w, cc, cc.act[q], s, dt)
+
+
+@njit(cache=True)
+def _pose_one(st, w, cc, p, s, dt):
+    x0 = w.x0[p]
+    x1 = cc.x1[p]
+    s2 = s * s
+    s3 = s2 * s
+    h00 = 2.0 * s3 - 3.0 * s2 + 1.0
+    h10 = s3 - 2.0 * s2 + s
+    h01 = -2.0 * s3 + 3.0 * s2
+    h11 = s3 - s2
+    d00 = 6.0 * s2 - 6.0 * s
+    d10 = 3.0 * s2 - 4.0 * s + 1.0
+    d11 = 3.0 * s2 - 2.0 * s
+    for i in range(3):
+        cc.P[p, i] = h00 * x0[i] + h10 * dt * x0[3 + i] + h01 * x1[i] + h11 * dt * x1[3 + i] + cc.dx[p, i]
+        cc.V[p, i] = (d00 * (x0[i] - x1[i])) / dt + d10 * x0[3 + i] + d11 * x1[3 + i] + cc.dv[p, i]
+    # slerp q0 → q1 (shortest arc), then Q = q_f ⊗ δq
+    a0, a1, a2, a3 = x0[6], x0[7], x0[8], x0[9]
+    b0, b1, b2, b3 = x1[6], x1[7], x1[8], x1[9]
+    dot = a0 * b0 + a1 * b1 + a2 * b2 + a3 * b3
+    if dot < 0.0:
+        b0, b1, b2, b3, dot = -b0, -b1, -b2, -b3, -dot
+    if s == 0.0:
+        f0, f1, f2, f3 = a0, a1, a2, a3
+    elif s == 1.0:
+        f0, f1, f2, f3 = b0, b1, b2, b3
+    elif dot > 0.9999999:
+        f0 = a0 + s * (b0 - a0)
+        f1 = a1 + s * (b1 - a1)
+        f2 = a2 + s * (b2 - a2)
+        f3 = a3 + s * (b3 - a3)
+        nf = math.sqrt(f0 * f0 + f1 * f1 + f2 * f2 + f3 * f3)
+        f0, f1, f2, f3 = f0 / nf, f1 / nf, f2 / nf, f3 / nf
+    else:
+        th = math.acos(dot)
+        sa = math.sin((1.0 - s) * th) / math.sin(th)
+        sb = math.sin(s * th) / math.sin(th)
+        f0 = sa * a0 + sb * b0
+        f1 = sa * a1 + sb * b1
+        f2 = sa * a2 + sb * b2
+        f3 = sa * a3 + sb * b3
+    dq = cc.dq[p]
+    q0, q1, q2, q3 = _qmul(f0, f1, f2, f3, dq[0], dq[1], dq[2], dq[3])
+    rot = cc.rot[p]
+    _quat_to_matrix(q0, q1, q2, q3, rot)
+    ib = st.inertia_inv[p]
+    iw = cc.iw[p]
+    for i in range(3):
+        for j in range(3):
+            acc = 0.0
+            for a in range(3):
+                for b in range(3):
+                    acc += rot[i, a] * ib[a, b] * rot[j, b]
+            iw[i, j] = acc
+    for i in range(3):
+        cc.Om[p, i] = (1.0 - s) * x0[10 + i] + s * x1[10 + i] \
+            + iw[i, 0] * cc.dL[p, 0] + iw[i, 1] * cc.dL[p, 1] + iw[i, 2] * cc.dL[p, 2]
+    for k in range(st.cstart[p], st.cstart[p + 1]):
+        r0, r1, r2 = st.r_body[k, 0], st.r_body[k, 1], st.r_body[k, 2]
+        for i in range(3):
+            cc.cp[k, i] = cc.P[p, i] + rot[i, 0] * r0 + rot[i, 1] * r1 + rot[i, 2] * r2
+
+
+@njit(cache=True, parallel=True)
+def component_forces(st, cc, h, update):
+    """Contact force and torque on every active grain from its component contacts
+    (module docstring) at the current poses (cc.P, cc.V, cc.Om, cc.cp); ``h`` the
+    sub-step ξ advances by, ``update`` False for a set-up evaluation (ξ and the
+    statistics untouched). Race-free: iteration p writes only grain p's rows."""
+    for q in prange(cc.n_act[0]):
+        _grain_force(st, cc, cc.act[q], h, update)
+
+
+@njit(cache=True)
+def _grain_force(st, cc, p, h, update):
+    kn, kt, zeta, mu = cc.par[0], cc.par[1], cc.par[2], cc.par[3]
+    lx, lz = cc.par[5], cc.par[7]
+    fx = fy = fz = 0.0
+    tx = ty = tz = 0.0
+    npart = 0
+    mp = st.mass[p]
+    for a in range(st.cstart[p], st.cstart[p + 1]):
+        da = st.d_comp[a]
+        for k in range(cc.nbr_count[a]):
+            b = cc.nbr[a, k]
+            g = cc.grain_of[b]
+            dsum = 0.5 * (da + st.d_comp[b])
+            delx = _min_image(cc.cp[a, 0] - cc.cp[b, 0], lx)
+            dely = cc.cp[a, 1] - cc.cp[b, 1]
+            delz = _min_image(cc.cp[a, 2] - cc.cp[b, 2], lz)
+            rsq = delx * delx + dely * dely + delz * delz
+            sh = cc.shear[a, k]
+            if rsq >= dsum * dsum or rsq == 0.0:
+                if update:
+                    sh[0] = 0.0
+                    sh[1] = 0.0
+                    sh[2] = 0.0
+                continue
+            r = math.sqrt(rsq)
+            n0, n1, n2 = delx / r, dely / r, delz / r
+            dlt = dsum - r
+            # contact point (middle of the overlap) relative to each centre of mass
+            arm_a = 0.5 * da - 0.5 * dlt
+            arm_b = 0.5 * st.d_comp[b] - 0.5 * dlt
+            ci0 = cc.cp[a, 0] - cc.P[p, 0] - arm_a * n0
+            ci1 = cc.cp[a, 1] - cc.P[p, 1] - arm_a * n1
+            ci2 = cc.cp[a, 2] - cc.P[p, 2] - arm_a * n2
+            cj0 = cc.cp[b, 0] - cc.P[g, 0] + arm_b * n0
+            cj1 = cc.cp[b, 1] - cc.P[g, 1] + arm_b * n1
+            cj2 = cc.cp[b, 2] - cc.P[g, 2] + arm_b * n2
+            oi, oj = cc.Om[p], cc.Om[g]
+            vr0 = (cc.V[p, 0] + oi[1] * ci2 - oi[2] * ci1) - (cc.V[g, 0] + oj[1] * cj2 - oj[2] * cj1)
+            vr1 = (cc.V[p, 1] + oi[2] * ci0 - oi[0] * ci2) - (cc.V[g, 1] + oj[2] * cj0 - oj[0] * cj2)
+            vr2 = (cc.V[p, 2] + oi[0] * ci1 - oi[1] * ci0) - (cc.V[g, 2] + oj[0] * cj1 - oj[1] * cj0)
+            vn = vr0 * n0 + vr1 * n1 + vr2 * n2
+            vt0 = vr0 - vn * n0
+            vt1 = vr1 - vn * n1
+            vt2 = vr2 - vn * n2
+            mg = st.mass[g]
+            meff = mp * mg / (mp + mg)
+            fn = kn * dlt - zeta * math.sqrt(meff * kn) * vn
+            if update:
+                sh[0] += vt0 * h
+                sh[1] += vt1 * h
+                sh[2] += vt2 * h
+                sn = sh[0] * n0 + sh[1] * n1 + sh[2] * n2
+                sh[0] -= sn * n0
+                sh[1] -= sn * n1
+                sh[2] -= sn * n2
+            ft0 = -kt * sh[0]
+            ft1 = -kt * sh[1]
+            ft2 = -kt * sh[2]
+            ftm = math.sqrt(ft0 * ft0 + ft1 * ft1 + ft2 * ft2)
+            lim = mu * abs(fn)
+            if ftm > lim:
+                sc = lim / ftm
+                ft0 *= sc
+                ft1 *= sc
+                ft2 *= sc
+                if update:
+                    sh[0] *= sc
+                    sh[1] *= sc
+                    sh[2] *= sc
+            f0 = fn * n0 + ft0
+            f1 = fn * n1 + ft1
+            f2 = fn * n2 + ft2
+            fx += f0
+            fy += f1
+            fz += f2
+            tx += ci1 * f2 - ci2 * f1
+            ty += ci2 * f0 - ci0 * f2
+            tz += ci0 * f1 - ci1 * f0
+            if update:
+                if dlt > cc.max_overlap[p]:
+                    cc.max_overlap[p] = dlt
+                cc.overlap_sum[p] += dlt
+                cc.contact_substeps[p] += 1
+                cc.touched[p] = 1
+                seen = False
+                for m in range(npart):
+                    if cc.new_partners[p, m] == g:
+                        seen = True
+                        break
+                if not seen and npart < cc.new_partners.shape[1]:
+                    cc.new_partners[p, npart] = g
+                    npart += 1
+    cc.force[p, 0] = fx
+    cc.force[p, 1] = fy
+    cc.force[p, 2] = fz
+    cc.torque[p, 0] = tx
+    cc.torque[p, 1] = ty
+    cc.torque[p, 2] = tz
+    if update:
+        # a grain–grain collision begins when a grain not touched at the last
+        # evaluation is touched now
+        for m in range(npart):
+            g = cc.new_partners[p, m]
+            old = False
+            for j in range(cc.n_partners[p]):
+                if cc.partners[p, j] == g:
+                    old = True
+                    break
+            if not old:
+                cc.collisions[p] += 1
+        for m in range(npart):
+            cc.partners[p, m] = cc.new_partners[p, m]
+        cc.n_partners[p] = npart
+
+
+@njit(cache=True, parallel=True)
+def _kick(st, cc, k):
+    dv, dL, force, torque, act, mass = cc.dv, cc.dL, cc.force, cc.torque, cc.act, st.mass
+    for q in prange(cc.n_act[0]):
+        p = act[q]
+        inv = k / mass[p]
+        for i in range(3):
+            dv[p, i] += inv * force[p, i]
+            dL[p, i] += k * torque[p, i]
+
+
+@njit(cache=True, parallel=True)
+def _drift(st, cc, h, half_skin):
+    """δx += h δv; δq ← exp(h R_fᵀ δΩ) ⊗ δq with δΩ = I_w⁻¹ δL (current pose). Returns
+    the number of grains whose deviation bound exceeds half the skin."""
+    over = np.zeros(cc.n_act[0], np.int64)
+    for q in prange(cc.n_act[0]):
+        over[q] = _drift_one(st, cc, cc.act[q], h, half_skin)
+    return over.sum()
+
+
+@njit(cache=True)
+def _drift_one(st, cc, p, h, half_skin):
+    iw = cc.iw[p]
+    rot = cc.rot[p]
+    dL = cc.dL[p]
+    w0 = iw[0, 0] * dL[0] + iw[0, 1] * dL[1] + iw[0, 2] * dL[2]
+    w1 = iw[1, 0] * dL[0] + iw[1, 1] * dL[1] + iw[1, 2] * dL[2]
+    w2 = iw[2, 0] * dL[0] + iw[2, 1] * dL[1] + iw[2, 2] * dL[2]
+    # body frame of the free path: R_f = R(Q) R(δq)ᵀ; R_fᵀ δΩ = R(δq) R(Q)ᵀ δΩ
+    b0 = rot[0, 0] * w0 + rot[1, 0] * w1 + rot[2, 0] * w2
+    b1 = rot[0, 1] * w0 + rot[1, 1] * w1 + rot[2, 1] * w2
+    b2 = rot[0, 2] * w0 + rot[1, 2] * w1 + rot[2, 2] * w2
+    dq = cc.dq[p]
+    # rotate (b0, b1, b2) by δq: v' = δq v δq*
+    t0, t1, t2, t3 = _qmul(dq[0], dq[1], dq[2], dq[3], 0.0, b0, b1, b2)
+    _, e0, e1, e2 = _qmul(t0, t1, t2, t3, dq[0], -dq[1], -dq[2], -dq[3])
+    wm = math.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
+    if wm > 0.0:
+        ang = h * wm
+        sn = math.sin(0.5 * ang) / wm
+        r0, r1, r2, r3 = _qmul(math.cos(0.5 * ang), sn * e0, sn * e1, sn * e2, dq[0], dq[1], dq[2], dq[3])
+        nq = math.sqrt(r0 * r0 + r1 * r1 + r2 * r2 + r3 * r3)
+        dq[0], dq[1], dq[2], dq[3] = r0 / nq, r1 / nq, r2 / nq, r3 / nq
+    dv2 = 0.0
+    for i in range(3):
+        cc.dx[p, i] += h * cc.dv[p, i]
+        dv2 += cc.dv[p, i] * cc.dv[p, i]
+    cc.dev[p] += h * (math.sqrt(dv2) + cc.rho[p] * wm)
+    return 1 if cc.dev[p] > half_skin else 0
+
+
+@njit(cache=True, parallel=True)
+def _finish(st, w, cc):
+    """End state of the grains that touched another one (module docstring, step 4)."""
+    for q in prange(cc.n_act[0]):
+        _finish_one(st, w, cc, cc.act[q])
+
+
+@njit(cache=True)
+def _finish_one(st, w, cc, p):
+    if cc.touched[p] != 0:
+        x1 = cc.x1[p]
+        dq = cc.dq[p]
+        q0, q1, q2, q3 = _qmul(x1[6], x1[7], x1[8], x1[9], dq[0], dq[1], dq[2], dq[3])
+        nq = math.sqrt(q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3)
+        st.quat[p, 0], st.quat[p, 1], st.quat[p, 2], st.quat[p, 3] = q0 / nq, q1 / nq, q2 / nq, q3 / nq
+        rot = cc.rot[p]
+        _quat_to_matrix(st.quat[p, 0], st.quat[p, 1], st.quat[p, 2], st.quat[p, 3], rot)
+        ib = st.inertia_inv[p]
+        iw = cc.iw[p]
+        for i in range(3):
+            for j in range(3):
+                acc = 0.0
+                for a in range(3):
+                    for b in range(3):
+                        acc += rot[i, a] * ib[a, b] * rot[j, b]
+                iw[i, j] = acc
+        for i in range(3):
+            st.pos[p, i] = x1[i] + cc.dx[p, i]
+            st.vel[p, i] = x1[3 + i] + cc.dv[p, i]
+            st.omega[p, i] = x1[10 + i] + iw[i, 0] * cc.dL[p, 0] + iw[i, 1] * cc.dL[p, 1] + iw[i, 2] * cc.dL[p, 2]
+        # the fluid samples are stale and the contact is impulsive: re-sample, restart
+        # the Basset memory (as a bed impact)
+        st.fresh[p] = 0
+        for k in range(st.cstart[p], st.cstart[p + 1]):
+            st.hist_meta[k, META_COUNT] = 0
+        low = 1e300
+        for k in range(st.cstart[p], st.cstart[p + 1]):
+            y = st.pos[p, 1] + rot[1, 0] * st.r_body[k, 0] + rot[1, 1] * st.r_body[k, 1] \
+                + rot[1, 2] * st.r_body[k, 2] - 0.5 * st.d_comp[k]
+            low = min(low, y)
+        if low > st.jump_ymax[p]:
+            st.jump_ymax[p] = low
+
+
+@njit(cache=True)
+def contact_phase(st, w, cc, dt, n_sub):
+    """Grain–grain contacts of one hydrodynamic step of length dt, after the free flight
+    of every grain (module docstring); returns the ClusterContacts to keep."""
+    n = st.pos.shape[0]
+    _reach(st, w, cc, dt)
+    na = _engage(st, w, cc)
+    # grains that are not active touch nothing: forget their partners and list rows
+    for p in range(n):
+        if cc.active[p] == 0:
+            cc.n_partners[p] = 0
+            for a in range(st.cstart[p], st.cstart[p + 1]):
+                cc.nbr_count[a] = 0
+    if na == 0:
+        return cc
+    cc.counters[3] += na
+    for q in range(na):
+        p = cc.act[q]
+        cc.touched[p] = 0
+        for i in range(3):
+            cc.dx[p, i] = 0.0
+            cc.dv[p, i] = 0.0
+            cc.dL[p, i] = 0.0
+        cc.dq[p, 0] = 1.0
+        cc.dq[p, 1] = 0.0
+        cc.dq[p, 2] = 0.0
+        cc.dq[p, 3] = 0.0
+    h = dt / n_sub
+    half_skin = 0.5 * cc.par[4]
+    _poses(st, w, cc, 0.0, dt)
+    cc = _build_list(st, cc)
+    component_forces(st, cc, h, False)
+    for s in range(n_sub):
+        _kick(st, cc, 0.5 * h)
+        over = _drift(st, cc, h, half_skin)
+        sig = (s + 1) / n_sub
+        _poses(st, w, cc, sig, dt)
+        if over > 0:
+            cc.counters[1] += over
+            cc = _build_list(st, cc)
+        component_forces(st, cc, h, True)
+        _kick(st, cc, 0.5 * h)
+    cc.counters[2] += na * n_sub
+    _finish(st, w, cc)
+    return cc
+
+
+# ----------------------------------------------------------------------------- run loop
+@njit(cache=True)
+def _clock():
+    with objmode(t="float64"):
+        t = time.perf_counter()
+    return t
+
+
+@njit(cache=True, parallel=True)
+def _free_flight(f, coef, bed, seed, st, w, hc, t, dt, top):
+    above_top, pos, status = st.above_top, st.pos, st.status  # writes in a prange body: not through the tuple
+    for p in prange(pos.shape[0]):
+        if status[p] != OK:
+            continue
+        step_grain(f, coef, bed, seed, st, w, hc, p, t, dt)
+        if pos[p, 1] > top:
+            above_top[p] += 1
+
+
+@njit(cache=True)
+def advance_clusters_contacts(f, coef, bed, seed, st, w, hc, t0, dt, n_steps, top, cc, n_sub, timers):
+    """clusters.advance_clusters with grain–grain contacts: free flight (RK4 + bed) of
+    every grain, then ``contact_phase``, each step; timers += (free flight s, contacts s).
+    Stops early when a grain is not finite or a jump buffer is full. Returns (steps
+    done, the ClusterContacts to keep)."""
+    n = st.pos.shape[0]
+    cap = st.jump_buf.shape[1]
+    for s in range(n_steps):
+        t = t0 + s * dt
+        c0 = _clock()
+        _free_flight(f, coef, bed, seed, st, w, hc, t, dt, top)
+        c1 = _clock()
+        bad = False
+        for p in range(n):
+            if st.status[p] != OK:
+                bad = True
+                break
+        if not bad:
+            cc = contact_phase(st, w, cc, dt, n_sub)
+        c2 = _clock()
+        timers[0] += c1 - c0
+        timers[1] += c2 - c1
+        stop = bad
+        for p in range(n):
+            if st.status[p] != OK or st.jump_buf_n[p] >= cap:
+                stop = True
+                break
+        if stop:
+            return s + 1, cc
+    return n_steps, cc
+
+
+# ----------------------------------------------------------------------------- diagnostics
+def _component_centres(st) -> np.ndarray:
+    out = np.zeros((st.r_body.shape[0], 3))
+    for p in range(st.pos.shape[0]):
+        rot = np.zeros((3, 3))
+        q = st.quat[p]
+        _quat_to_matrix(q[0], q[1], q[2], q[3], rot)
+        a, b = st.cstart[p], st.cstart[p + 1]
+        out[a:b] = st.pos[p] + st.r_body[a:b] @ rot.T
+    return out
+
+
+def brute_force_pairs(st, box, cut_extra: float = 0.0) -> set:
+    """All pairs (a < b) of component spheres of different grains closer than
+    (d_a + d_b)/2 + cut_extra (minimum image in x and z), by checking every pair."""
+    cp = _component_centres(st)
+    grain = np.repeat(np.arange(st.pos.shape[0]), np.diff(st.cstart))
+    out = set()
+    lx, lz = box[0], box[2]
+    for a in range(len(cp)):
+        d = cp[a + 1:] - cp[a]
+        d[:, 0] -= lx * np.floor(d[:, 0] / lx + 0.5)
+        d[:, 2] -= lz * np.floor(d[:, 2] / lz + 0.5)
+        lim = 0.5 * (st.d_comp[a] + st.d_comp[a + 1:]) + cut_extra
+        hit = np.nonzero(((d * d).sum(axis=1) < lim * lim) & (grain[a + 1:] != grain[a]))[0]
+        out.update((a, a + 1 + int(b)) for b in hit)
+    return out
+
+
+def listed_pairs(cc) -> set:
+    """Pairs (a < b) held by the component neighbour list."""
+    out = set()
+    for a in range(cc.nbr_count.shape[0]):
+        for k in range(int(cc.nbr_count[a])):
+            b = int(cc.nbr[a, k])
+            out.add((min(a, b), max(a, b)))
+    return out
+
+
+def missed_contacts(st, cc) -> int:
+    """Component pairs of different grains in contact now that the list does not hold
+    (brute force; for tests and diagnostics)."""
+    return len(brute_force_pairs(st, cc.par[5:8]) - listed_pairs(cc))
+
+
+def grain_pose_centres(st) -> np.ndarray:
+    """World component centres of the state (K, 3)."""
+    return _component_centres(st)
+
+
+__all__ += ["missed_contacts", "grain_pose_centres"]
