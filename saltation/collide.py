@@ -54,7 +54,8 @@ grain deflected by a contact can still reach a grain that had not joined: the fo
 kernel notices any contact with such a grain and *wakes* it at that sub-step (its
 deviation is exactly zero until then), so no contact is missed on deflected paths
 either. The cost of the phase is therefore n_sub × (grains close to a contact), not
-n_sub × N; ``counters[3]`` counts the grain-sub-steps actually done.
+n_sub × N; ``counters[3]`` counts the grain-sub-steps actually done (and "Memory
+layout" below keeps their cost per grain-sub-step independent of N).
 
 The bed in the contact phase
 ----------------------------
@@ -90,6 +91,24 @@ counted in ``overruns``; after such a step the end positions are searched afresh
 pairs in contact that the list does not hold (``missed_contacts``, reported in
 summary.json; the tests require zero).
 
+Memory layout (cost linear in N)
+--------------------------------
+The sub-stepped grains are a small share of all (~10–25 % of a 1 % suspension) and
+are scattered through the N-long grain arrays; touching a dozen such arrays per grain and
+sub-step made the phase memory-bound, its cost per grain-sub-step growing with N (cache
+misses: 119 → 534 ns for the kick/drift alone from N = 5 k to 100 k). So each phase first
+gathers the candidates (start ≤ 1) and their list neighbours into a ``SubstepSet``:
+compact arrays numbered in the list's cell order (spatial neighbours sit close in
+memory), with the free-flight path of every member (x₀, u₀, ϖ₀, x₁, u₁, ϖ₁ in one
+18-wide row), and for the candidates their neighbour rows (flat, remapped to member
+indices, in the list's order), tangential springs, bed-contact slots, counters and jump
+state. All sub-steps run on these; the changed state is scattered back once at the end
+of the phase. A woken grain that was only a neighbour gets its row then, its own
+neighbours appended to the set (the set grows when needed). The arithmetic and the
+order of every sum are those of the per-grain arrays, so results do not depend on the
+layout. Per step the phase still makes O(N) passes (reach, engagement test, the gather
+scan, list rebuilds), each a few ns per grain; the sub-steps cost O(grains sub-stepped).
+
 Statistics (per grain, race-free): ``cl.collisions`` (contacts begun), ``cl.max_overlap``,
 and here ``contact_substeps`` (sub-steps spent in each contact, summed) and
 ``overlap_sum`` (overlap summed over those sub-steps): mean contact duration in sub-steps
@@ -109,7 +128,7 @@ from .contacts import LEVER_RADIUS, ContactList, hard_sphere_collisions, normal_
 from .history import META_COUNT
 from .rng import uniform2
 
-__all__ = ["ContactPhase", "BedContext", "make_contact_phase", "make_bed_context", "soft_contact_phase",
+__all__ = ["ContactPhase", "SubstepSet", "BedContext", "make_contact_phase", "make_bed_context", "soft_contact_phase",
            "hard_contact_phase"]
 
 BED_SLOTS = 4  # bed spheres one grain can touch at once (3 in a hollow of the packed layer)
@@ -148,26 +167,15 @@ def make_bed_context(n, packed: bool, pb, restitution, friction, max_tilt, kn, k
 
 
 class ContactPhase(NamedTuple):
-    active: np.ndarray  # (N,) uint8: sub-stepped in this step
-    act: np.ndarray  # (N,) int64: ids of the active grains, n_act[0] of them
+    active: np.ndarray  # (N,) uint8: sub-stepped in this step (the bed pass skips them)
+    act: np.ndarray  # (N,) int64: ids of the sub-stepped grains, n_act[0] of them (cell order)
     n_act: np.ndarray  # (1,) int64
-    wake: np.ndarray  # (N,) uint8: touched a grain that was not active
-    touched: np.ndarray  # (N,) uint8: had a contact in this step
     reach: np.ndarray  # (N,) float64: D, how far the free-flight path gets from x₀
-    dx: np.ndarray  # (N,3) deviations from the free-flight path
-    dv: np.ndarray  # (N,3)
-    dw: np.ndarray  # (N,3)
-    P: np.ndarray  # (N,3) position, velocity, spin at the current sub-step (active rows)
-    V: np.ndarray  # (N,3)
-    W: np.ndarray  # (N,3)
-    force: np.ndarray  # (N,3) contact force / torque at the last evaluation (active rows)
-    torque: np.ndarray  # (N,3)
     x0pos: np.ndarray  # (N,3) start-of-step positions, for list rebuilds
-    dev_max: np.ndarray  # (N,) largest |δx|² in this step
     ref_bound: np.ndarray  # (N,) bound on the free-flight path's distance from the list's reference
-    nrm: np.ndarray  # (N,3) scratch: virtual bed normal
     margin: np.ndarray  # (N,) scratch: engagement reach incl. the bed-rebound margin
     start: np.ndarray  # (N,) earliest possible contact in the step (fraction s; inf: none)
+    loc: np.ndarray  # (N,) int64: a grain's row in the SubstepSet, -1 outside a contact phase
     bed_overlap_max: np.ndarray  # (N,) largest overlap with a bed sphere (d)
     contact_substeps: np.ndarray  # (N,) int64 Σ sub-steps in contact (statistics)
     overlap_sum: np.ndarray  # (N,) float64 Σ overlap over those sub-steps (d)
@@ -175,16 +183,104 @@ class ContactPhase(NamedTuple):
 
 
 def make_contact_phase(n: int) -> ContactPhase:
-    z3 = lambda: np.zeros((n, 3))  # noqa: E731
     return ContactPhase(
-        np.zeros(n, np.uint8), np.zeros(n, np.int64), np.zeros(1, np.int64), np.zeros(n, np.uint8),
-        np.zeros(n, np.uint8), np.zeros(n), z3(), z3(), z3(), z3(), z3(), z3(), z3(), z3(), z3(),
-        np.zeros(n), np.zeros(n), z3(), np.zeros(n), np.zeros(n), np.zeros(n), np.zeros(n, np.int64),
+        np.zeros(n, np.uint8), np.zeros(n, np.int64), np.zeros(1, np.int64), np.zeros(n), np.zeros((n, 3)),
+        np.zeros(n), np.zeros(n), np.zeros(n), np.full(n, -1, np.int64), np.zeros(n), np.zeros(n, np.int64),
         np.zeros(n), np.zeros(5, np.int64),
     )
 
 
+class SubstepSet(NamedTuple):
+    """The grains of one contact phase, copied into compact arrays (module docstring,
+    "Memory layout"): members 0..n[0]-1 in cell order (woken grains' neighbours appended),
+    each with its free-flight path; members with a row (``has_row``) also carry their
+    neighbour list (flat, ``nbr[rs : rs + rc]``, neighbours as member indices), contact
+    history and the per-grain state the sub-steps change. ``gid``: the grain's id."""
+    n: np.ndarray  # (1,) int64 members in use
+    n_rows: np.ndarray  # (1,) int64 flat row entries in use
+    n_act: np.ndarray  # (1,) int64 active members
+    gid: np.ndarray  # (C,) int64
+    path: np.ndarray  # (C, 18) x₀, u₀, ϖ₀, x₁, u₁, ϖ₁ of the free flight
+    cur: np.ndarray  # (C, 9) P, V, W at the current sub-step (active members)
+    dev: np.ndarray  # (C, 9) deviations δx, δu, δϖ from the free-flight path
+    ft: np.ndarray  # (C, 6) contact force and torque at the last evaluation
+    dev_max: np.ndarray  # (C,) largest |δx|² in this step
+    start: np.ndarray  # (C,) earliest possible contact (inf: not a candidate)
+    active: np.ndarray  # (C,) uint8 sub-stepped from now on
+    wake: np.ndarray  # (C,) uint8 touched a member that was not active
+    touched: np.ndarray  # (C,) uint8 had a contact in this step
+    has_row: np.ndarray  # (C,) uint8
+    queue: np.ndarray  # (C,) int64 scratch: members woken in a round
+    rs: np.ndarray  # (C,) int64 first flat entry of the row
+    rc: np.ndarray  # (C,) int64 neighbours in the row
+    nbr: np.ndarray  # (R,) int64 neighbour (member index)
+    shear: np.ndarray  # (R, 3) tangential spring
+    touch: np.ndarray  # (R,) uint8
+    collisions: np.ndarray  # (C,) int64 (the ContactList's counters, copied in and out)
+    max_overlap: np.ndarray  # (C,)
+    n_touch: np.ndarray  # (C,) int64
+    contact_substeps: np.ndarray  # (C,) int64
+    overlap_sum: np.ndarray  # (C,)
+    bed_overlap_max: np.ndarray  # (C,)
+    slot_id: np.ndarray  # (C, S) int64 (BedContext's, copied in and out)
+    slot_c: np.ndarray  # (C, S, 3)
+    slot_shear: np.ndarray  # (C, S, 3)
+    in_bed: np.ndarray  # (C,) uint8
+    last_contact: np.ndarray  # (C,) int64
+    nrm: np.ndarray  # (C, 3) scratch: virtual bed normal
+    impacts: np.ndarray  # (C,) int64 (GrainState's, copied in and out)
+    jump_t0: np.ndarray  # (C,)
+    jump_x0: np.ndarray  # (C,)
+    jump_ymax: np.ndarray  # (C,)
+
+
+@njit(cache=True)
+def _make_set(c, r):
+    c = max(c, 1)
+    r = max(r, 1)
+    return SubstepSet(
+        np.zeros(1, np.int64), np.zeros(1, np.int64), np.zeros(1, np.int64), np.empty(c, np.int64),
+        np.empty((c, 18)), np.empty((c, 9)), np.empty((c, 9)), np.empty((c, 6)), np.empty(c), np.empty(c),
+        np.empty(c, np.uint8), np.empty(c, np.uint8), np.empty(c, np.uint8), np.empty(c, np.uint8),
+        np.empty(c, np.int64), np.empty(c, np.int64), np.empty(c, np.int64), np.empty(r, np.int64),
+        np.empty((r, 3)), np.empty(r, np.uint8), np.empty(c, np.int64), np.empty(c), np.empty(c, np.int64),
+        np.empty(c, np.int64), np.empty(c), np.empty(c), np.empty((c, BED_SLOTS), np.int64),
+        np.empty((c, BED_SLOTS, 3)), np.empty((c, BED_SLOTS, 3)), np.empty(c, np.uint8), np.empty(c, np.int64),
+        np.empty((c, 3)), np.empty(c, np.int64), np.empty(c), np.empty(c), np.empty(c),
+    )
+
+
+@njit(cache=True)
+def _resized(a, n):
+    out = np.empty((n,) + a.shape[1:], a.dtype)
+    m = min(n, a.shape[0])
+    out[:m] = a[:m]
+    return out
+
+
+@njit(cache=True)
+def _grow(cs, c, r):
+    """cs with room for at least c members and r flat row entries (contents kept)."""
+    if c <= cs.gid.shape[0] and r <= cs.nbr.shape[0]:
+        return cs
+    c = max(c, 2 * cs.gid.shape[0]) if c > cs.gid.shape[0] else cs.gid.shape[0]
+    r = max(r, 2 * cs.nbr.shape[0]) if r > cs.nbr.shape[0] else cs.nbr.shape[0]
+    return SubstepSet(
+        cs.n, cs.n_rows, cs.n_act, _resized(cs.gid, c), _resized(cs.path, c), _resized(cs.cur, c),
+        _resized(cs.dev, c), _resized(cs.ft, c), _resized(cs.dev_max, c), _resized(cs.start, c),
+        _resized(cs.active, c), _resized(cs.wake, c), _resized(cs.touched, c), _resized(cs.has_row, c),
+        _resized(cs.queue, c), _resized(cs.rs, c), _resized(cs.rc, c), _resized(cs.nbr, r), _resized(cs.shear, r),
+        _resized(cs.touch, r), _resized(cs.collisions, c), _resized(cs.max_overlap, c), _resized(cs.n_touch, c),
+        _resized(cs.contact_substeps, c), _resized(cs.overlap_sum, c), _resized(cs.bed_overlap_max, c),
+        _resized(cs.slot_id, c), _resized(cs.slot_c, c), _resized(cs.slot_shear, c), _resized(cs.in_bed, c),
+        _resized(cs.last_contact, c), _resized(cs.nrm, c), _resized(cs.impacts, c), _resized(cs.jump_t0, c),
+        _resized(cs.jump_x0, c), _resized(cs.jump_ymax, c),
+    )
+
+
 # ----------------------------------------------------------------------------- path
+# Everything below works on a SubstepSet (member indices a, b); the grain arrays are read
+# and written only when the set is gathered, scattered and (rarely) extended.
 
 
 @njit(cache=True, inline="always", error_model="numpy", _nrt=False)
@@ -205,43 +301,44 @@ def _hermite(x0, x1, v0, v1, s, dt):
 
 
 @njit(cache=True, inline="always", error_model="numpy", _nrt=False)
-def _set_path_inl(x0w, pos, vel, spin, j, s, dt, ph):
-    """P, V, W of grain j at s: free-flight path plus its deviation."""
-    for a in range(3):
-        x, v = _hermite(x0w[j, a], pos[j, a], x0w[j, 3 + a], vel[j, a], s, dt)
-        ph.P[j, a] = x + ph.dx[j, a]
-        ph.V[j, a] = v + ph.dv[j, a]
-        ph.W[j, a] = (1.0 - s) * x0w[j, 6 + a] + s * spin[j, a] + ph.dw[j, a]
+def _set_path(cs, a, s, dt):
+    """cur (P, V, W) of member a at s: free-flight path plus its deviation."""
+    path, cur, dev = cs.path, cs.cur, cs.dev
+    for c in range(3):
+        x, v = _hermite(path[a, c], path[a, 9 + c], path[a, 3 + c], path[a, 12 + c], s, dt)
+        cur[a, c] = x + dev[a, c]
+        cur[a, 3 + c] = v + dev[a, 3 + c]
+        cur[a, 6 + c] = (1.0 - s) * path[a, 6 + c] + s * path[a, 15 + c] + dev[a, 6 + c]
 
 
 @njit(cache=True, inline="always", error_model="numpy", _nrt=False)
-def _state_of(x0w, pos, vel, spin, j, s, dt, ph):
-    """(x, v, ω) of neighbour j at s: from P/V/W when active, else its free-flight path."""
-    if ph.active[j] != 0:
-        return (ph.P[j, 0], ph.P[j, 1], ph.P[j, 2], ph.V[j, 0], ph.V[j, 1], ph.V[j, 2],
-                ph.W[j, 0], ph.W[j, 1], ph.W[j, 2])
-    x0, v0 = _hermite(x0w[j, 0], pos[j, 0], x0w[j, 3], vel[j, 0], s, dt)
-    x1, v1 = _hermite(x0w[j, 1], pos[j, 1], x0w[j, 4], vel[j, 1], s, dt)
-    x2, v2 = _hermite(x0w[j, 2], pos[j, 2], x0w[j, 5], vel[j, 2], s, dt)
+def _state_of(cs, b, s, dt):
+    """(x, v, ω) of member b at s: cur when active, else its free-flight path."""
+    if cs.active[b] != 0:
+        c = cs.cur
+        return c[b, 0], c[b, 1], c[b, 2], c[b, 3], c[b, 4], c[b, 5], c[b, 6], c[b, 7], c[b, 8]
+    p = cs.path
+    x0, v0 = _hermite(p[b, 0], p[b, 9], p[b, 3], p[b, 12], s, dt)
+    x1, v1 = _hermite(p[b, 1], p[b, 10], p[b, 4], p[b, 13], s, dt)
+    x2, v2 = _hermite(p[b, 2], p[b, 11], p[b, 5], p[b, 14], s, dt)
     return (x0, x1, x2, v0, v1, v2,
-            (1.0 - s) * x0w[j, 6] + s * spin[j, 0],
-            (1.0 - s) * x0w[j, 7] + s * spin[j, 1],
-            (1.0 - s) * x0w[j, 8] + s * spin[j, 2])
+            (1.0 - s) * p[b, 6] + s * p[b, 15],
+            (1.0 - s) * p[b, 7] + s * p[b, 16],
+            (1.0 - s) * p[b, 8] + s * p[b, 17])
 
 
 # ----------------------------------------------------------------------------- forces
-# The per-grain kernels below allocate nothing and are compiled without reference
-# counting (_nrt=False): a call passing the ~20 arrays of a ContactPhase otherwise costs
-# ~40 atomic increments and decrements, more than the arithmetic (integrator.py).
+# The sub-step kernels allocate nothing and are compiled without reference counting
+# (_nrt=False): field reads of the named tuples otherwise cost atomic increments and
+# decrements in the innermost loops (integrator.py).
 
 
 @njit(cache=True, inline="always", error_model="numpy", _nrt=False)
-def _grain_force_inl(i, x0w, pos, vel, spin, model, box, per, nbr, nbr_count, shear, touch, collisions,
-                 max_overlap, n_touch, s, dt, h, update, ph):
-    """Contact force and torque on active grain i at sub-step position s (contacts.py's
+def _grain_force(a, cs, model, box, per, s, dt, h, update):
+    """Contact force and torque on active member a at sub-step position s (contacts.py's
     gran/hooke/history arithmetic, mirrored exactly so both grains of a pair compute
     negated vectors); h: the sub-step the tangential spring advances by. box, per: the
-    contact grid's lengths and periodic flags; the other arrays are the ContactList's."""
+    contact grid's lengths and periodic flags."""
     lx, ly, lz = box[0], box[1], box[2]
     px, py, pz = per[0], per[1], per[2]
     d = model.diameter
@@ -252,6 +349,7 @@ def _grain_force_inl(i, x0w, pos, vel, spin, model, box, per, nbr, nbr_count, sh
     damp_n = meff * model.gamma_n
     damp_t = meff * model.gamma_t
     at_radius = model.lever == LEVER_RADIUS
+    cur, active, nbr, shear, touch = cs.cur, cs.active, cs.nbr, cs.shear, cs.touch
     fx = 0.0
     fy = 0.0
     fz = 0.0
@@ -260,70 +358,72 @@ def _grain_force_inl(i, x0w, pos, vel, spin, model, box, per, nbr, nbr_count, sh
     tz = 0.0
     touching = 0
     osum = 0.0
-    xi, yi, zi = ph.P[i, 0], ph.P[i, 1], ph.P[i, 2]
-    for k in range(nbr_count[i]):
-        j = nbr[i, k]
-        xj, yj, zj, vj0, vj1, vj2, wj0, wj1, wj2 = _state_of(x0w, pos, vel, spin, j, s, dt, ph)
+    omax = cs.max_overlap[a]
+    xi, yi, zi = cur[a, 0], cur[a, 1], cur[a, 2]
+    r0 = cs.rs[a]
+    for k in range(r0, r0 + cs.rc[a]):
+        b = nbr[k]
+        xj, yj, zj, vj0, vj1, vj2, wj0, wj1, wj2 = _state_of(cs, b, s, dt)
         delx = min_image(xi - xj, lx, px)
         dely = min_image(yi - yj, ly, py)
         delz = min_image(zi - zj, lz, pz)
         rsq = delx * delx + dely * dely + delz * delz
         if rsq >= d2:
-            if touch[i, k] != 0:
-                touch[i, k] = 0
-                shear[i, k, 0] = 0.0
-                shear[i, k, 1] = 0.0
-                shear[i, k, 2] = 0.0
+            if touch[k] != 0:
+                touch[k] = 0
+                shear[k, 0] = 0.0
+                shear[k, 1] = 0.0
+                shear[k, 2] = 0.0
             continue
-        if ph.active[j] == 0:
-            ph.wake[i] = 1
+        if active[b] == 0:
+            cs.wake[a] = 1
         touching += 1
-        if touch[i, k] == 0:
-            touch[i, k] = 1
-            collisions[i] += 1
+        if touch[k] == 0:
+            touch[k] = 1
+            cs.collisions[a] += 1
         if rsq == 0.0:
             continue
         r = math.sqrt(rsq)
         rinv = 1.0 / r
         rsqinv = 1.0 / rsq
-        vr1 = ph.V[i, 0] - vj0
-        vr2 = ph.V[i, 1] - vj1
-        vr3 = ph.V[i, 2] - vj2
+        vr1 = cur[a, 3] - vj0
+        vr2 = cur[a, 4] - vj1
+        vr3 = cur[a, 5] - vj2
         vnnr = vr1 * delx + vr2 * dely + vr3 * delz
         vt1 = vr1 - delx * vnnr * rsqinv
         vt2 = vr2 - dely * vnnr * rsqinv
         vt3 = vr3 - delz * vnnr * rsqinv
         arm = rad if at_radius else 0.5 * r
-        wr1 = arm * (ph.W[i, 0] + wj0) * rinv
-        wr2 = arm * (ph.W[i, 1] + wj1) * rinv
-        wr3 = arm * (ph.W[i, 2] + wj2) * rinv
+        wr1 = arm * (cur[a, 6] + wj0) * rinv
+        wr2 = arm * (cur[a, 7] + wj1) * rinv
+        wr3 = arm * (cur[a, 8] + wj2) * rinv
         ccel = kn * (d - r) * rinv - damp_n * vnnr * rsqinv
         vtr1 = vt1 - (delz * wr2 - dely * wr3)
         vtr2 = vt2 - (delx * wr3 - delz * wr1)
         vtr3 = vt3 - (dely * wr1 - delx * wr2)
-        sh = shear[i, k]
         if update:
-            sh[0] += vtr1 * h
-            sh[1] += vtr2 * h
-            sh[2] += vtr3 * h
-        shrmag = math.sqrt(sh[0] * sh[0] + sh[1] * sh[1] + sh[2] * sh[2])
+            shear[k, 0] += vtr1 * h
+            shear[k, 1] += vtr2 * h
+            shear[k, 2] += vtr3 * h
+        sh0, sh1, sh2 = shear[k, 0], shear[k, 1], shear[k, 2]
+        shrmag = math.sqrt(sh0 * sh0 + sh1 * sh1 + sh2 * sh2)
         if update:
-            rsht = (sh[0] * delx + sh[1] * dely + sh[2] * delz) * rsqinv
-            sh[0] -= rsht * delx
-            sh[1] -= rsht * dely
-            sh[2] -= rsht * delz
-        fs1 = -(kt * sh[0] + damp_t * vtr1)
-        fs2 = -(kt * sh[1] + damp_t * vtr2)
-        fs3 = -(kt * sh[2] + damp_t * vtr3)
+            rsht = (sh0 * delx + sh1 * dely + sh2 * delz) * rsqinv
+            sh0 -= rsht * delx
+            sh1 -= rsht * dely
+            sh2 -= rsht * delz
+        fs1 = -(kt * sh0 + damp_t * vtr1)
+        fs2 = -(kt * sh1 + damp_t * vtr2)
+        fs3 = -(kt * sh2 + damp_t * vtr3)
         fs = math.sqrt(fs1 * fs1 + fs2 * fs2 + fs3 * fs3)
         fn = mu * abs(ccel * r)
         if fs > fn:
             if shrmag != 0.0:
                 scale = fn / fs
                 if kt > 0.0:
-                    sh[0] = scale * (sh[0] + damp_t * vtr1 / kt) - damp_t * vtr1 / kt
-                    sh[1] = scale * (sh[1] + damp_t * vtr2 / kt) - damp_t * vtr2 / kt
-                    sh[2] = scale * (sh[2] + damp_t * vtr3 / kt) - damp_t * vtr3 / kt
+                    sh0 = scale * (sh0 + damp_t * vtr1 / kt) - damp_t * vtr1 / kt
+                    sh1 = scale * (sh1 + damp_t * vtr2 / kt) - damp_t * vtr2 / kt
+                    sh2 = scale * (sh2 + damp_t * vtr3 / kt) - damp_t * vtr3 / kt
                 fs1 *= scale
                 fs2 *= scale
                 fs3 *= scale
@@ -331,6 +431,9 @@ def _grain_force_inl(i, x0w, pos, vel, spin, model, box, per, nbr, nbr_count, sh
                 fs1 = 0.0
                 fs2 = 0.0
                 fs3 = 0.0
+        shear[k, 0] = sh0
+        shear[k, 1] = sh1
+        shear[k, 2] = sh2
         fx += delx * ccel + fs1
         fy += dely * ccel + fs2
         fz += delz * ccel + fs3
@@ -341,58 +444,48 @@ def _grain_force_inl(i, x0w, pos, vel, spin, model, box, per, nbr, nbr_count, sh
         ty -= arm * tor2
         tz -= arm * tor3
         osum += d - r
-        if d - r > max_overlap[i]:
-            max_overlap[i] = d - r
-    ph.force[i, 0] = fx
-    ph.force[i, 1] = fy
-    ph.force[i, 2] = fz
-    ph.torque[i, 0] = tx
-    ph.torque[i, 1] = ty
-    ph.torque[i, 2] = tz
-    n_touch[i] = touching
+        if d - r > omax:
+            omax = d - r
+    cs.max_overlap[a] = omax
+    ft = cs.ft
+    ft[a, 0] = fx
+    ft[a, 1] = fy
+    ft[a, 2] = fz
+    ft[a, 3] = tx
+    ft[a, 4] = ty
+    ft[a, 5] = tz
+    cs.n_touch[a] = touching
     if touching > 0:
-        ph.touched[i] = 1
+        cs.touched[a] = 1
         if update:
-            ph.contact_substeps[i] += touching
-            ph.overlap_sum[i] += osum
+            cs.contact_substeps[a] += touching
+            cs.overlap_sum[a] += osum
 
-
-@njit(cache=True, error_model="numpy", _nrt=False)
-def _set_path(x0w, pos, vel, spin, j, s, dt, ph):
-    """_set_path_inl as a call (for parallel loops, which must not inline code that
-    writes through a named tuple's arrays; integrator.py)."""
-    _set_path_inl(x0w, pos, vel, spin, j, s, dt, ph)
-
-
-@njit(cache=True, error_model="numpy", _nrt=False)
-def _grain_force(i, x0w, pos, vel, spin, model, box, per, nbr, nbr_count, shear, touch, collisions,
-                 max_overlap, n_touch, s, dt, h, update, ph):
-    """_grain_force_inl as a call (see _set_path)."""
-    _grain_force_inl(i, x0w, pos, vel, spin, model, box, per, nbr, nbr_count, shear, touch, collisions,
-                     max_overlap, n_touch, s, dt, h, update, ph)
 
 @njit(cache=True, inline="always", error_model="numpy", _nrt=False)
-def _bed_force_inl(i, st, bc, ph, s, dt, h, update):
-    """Soft contact of active grain i with the bed spheres it touches at sub-step s, added
-    to ph.force[i] / ph.torque[i] (module docstring, "The bed in the contact phase").
+def _bed_force(a, cs, st, bc, s, dt, h, update):
+    """Soft contact of active member a with the bed spheres it touches at sub-step s, added
+    to its force and torque (module docstring, "The bed in the contact phase").
     The spring–dashpot of the grain pairs with a fixed partner: m_eff = m, the bed's
     restitution (γ_n from it) and friction, the same k_n and k_t."""
-    px = ph.P[i, 0]
-    py = ph.P[i, 1]
-    pz = ph.P[i, 2]
+    cur, slot_id, slot_c = cs.cur, cs.slot_id, cs.slot_c
+    px = cur[a, 0]
+    py = cur[a, 1]
+    pz = cur[a, 2]
     used = 0
     for k in range(BED_SLOTS):
-        if bc.slot_id[i, k] != FREE:
+        if slot_id[a, k] != FREE:
             used += 1
     if used == 0 and py >= 0.5:
         if update:
-            bc.in_bed[i] = 0
+            cs.in_bed[a] = 0
         return
     packed = bc.params[0] != 0.0
     mu = bc.params[2]
     damp_n = bc.params[4]
     kn = bc.params[5]
     kt = bc.params[6]
+    slot_shear = cs.slot_shear
     if update and py < 0.5:
         if packed:
             lx, lz = bc.box[0], bc.box[2]
@@ -401,9 +494,9 @@ def _bed_force_inl(i, st, bc, ph, s, dt, h, update):
             sz = pz - lz * math.floor(pz / lz)
             ix = min(int(sx / bc.size[0]), nx - 1)
             iz = min(int(sz / bc.size[2]), nz - 1)
-            for a in range(-1, 2):
-                for b in range(-1, 2):
-                    c = ((ix + a) % nx) * nz + (iz + b) % nz
+            for ca in range(-1, 2):
+                for cb in range(-1, 2):
+                    c = ((ix + ca) % nx) * nz + (iz + cb) % nz
                     for q in range(bc.cell_start[c], bc.cell_start[c] + bc.cell_count[c]):
                         kb = bc.order[q]
                         ax = min_image(px - bc.centres[kb, 0], lx, 1)
@@ -414,43 +507,43 @@ def _bed_force_inl(i, st, bc, ph, s, dt, h, update):
                         known = False
                         free = -1
                         for k in range(BED_SLOTS):
-                            if bc.slot_id[i, k] == kb:
+                            if slot_id[a, k] == kb:
                                 known = True
-                            elif bc.slot_id[i, k] == FREE and free < 0:
+                            elif slot_id[a, k] == FREE and free < 0:
                                 free = k
                         if known or free < 0:
                             continue
-                        bc.slot_id[i, free] = kb
-                        bc.slot_c[i, free, 0] = px - ax
-                        bc.slot_c[i, free, 1] = py - ay
-                        bc.slot_c[i, free, 2] = pz - az
-                        bc.slot_shear[i, free, 0] = 0.0
-                        bc.slot_shear[i, free, 1] = 0.0
-                        bc.slot_shear[i, free, 2] = 0.0
+                        slot_id[a, free] = kb
+                        slot_c[a, free, 0] = px - ax
+                        slot_c[a, free, 1] = py - ay
+                        slot_c[a, free, 2] = pz - az
+                        slot_shear[a, free, 0] = 0.0
+                        slot_shear[a, free, 1] = 0.0
+                        slot_shear[a, free, 2] = 0.0
                         used += 1
         elif used == 0:
             # virtual bed: a bed grain of diameter d placed where the grain's bottom
             # crossed the bed top, its normal tilted at random (bed.virtual_bed_normal)
-            nrm = ph.nrm[i]
-            if ph.V[i, 1] < 0.0:
-                xi1, xi2 = uniform2(bc.ints[0], i, st.impacts[i])
-                virtual_bed_normal(ph.V[i], xi1, xi2, bc.params[3], nrm)
+            nrm = cs.nrm[a]
+            if cur[a, 4] < 0.0:
+                xi1, xi2 = uniform2(bc.ints[0], cs.gid[a], cs.impacts[a])
+                virtual_bed_normal(cur[a, 3:6], xi1, xi2, bc.params[3], nrm)
             else:
                 nrm[0] = 0.0
                 nrm[1] = 1.0
                 nrm[2] = 0.0
             depth = 1.0 - (0.5 - py)
-            bc.slot_id[i, 0] = VIRTUAL
-            bc.slot_c[i, 0, 0] = px - depth * nrm[0]
-            bc.slot_c[i, 0, 1] = py - depth * nrm[1]
-            bc.slot_c[i, 0, 2] = pz - depth * nrm[2]
-            bc.slot_shear[i, 0, 0] = 0.0
-            bc.slot_shear[i, 0, 1] = 0.0
-            bc.slot_shear[i, 0, 2] = 0.0
+            slot_id[a, 0] = VIRTUAL
+            slot_c[a, 0, 0] = px - depth * nrm[0]
+            slot_c[a, 0, 1] = py - depth * nrm[1]
+            slot_c[a, 0, 2] = pz - depth * nrm[2]
+            slot_shear[a, 0, 0] = 0.0
+            slot_shear[a, 0, 1] = 0.0
+            slot_shear[a, 0, 2] = 0.0
             used = 1
     if used == 0:
         if update:
-            bc.in_bed[i] = 0
+            cs.in_bed[a] = 0
         return
     fx = 0.0
     fy = 0.0
@@ -460,14 +553,14 @@ def _bed_force_inl(i, st, bc, ph, s, dt, h, update):
     tz = 0.0
     nb = 0
     for k in range(BED_SLOTS):
-        if bc.slot_id[i, k] == FREE:
+        if slot_id[a, k] == FREE:
             continue
-        delx = px - bc.slot_c[i, k, 0]
-        dely = py - bc.slot_c[i, k, 1]
-        delz = pz - bc.slot_c[i, k, 2]
+        delx = px - slot_c[a, k, 0]
+        dely = py - slot_c[a, k, 1]
+        delz = pz - slot_c[a, k, 2]
         rsq = delx * delx + dely * dely + delz * delz
         if rsq >= 1.0:
-            bc.slot_id[i, k] = FREE
+            slot_id[a, k] = FREE
             continue
         nb += 1
         if rsq == 0.0:
@@ -475,153 +568,86 @@ def _bed_force_inl(i, st, bc, ph, s, dt, h, update):
         r = math.sqrt(rsq)
         rinv = 1.0 / r
         rsqinv = 1.0 / rsq
-        vr1 = ph.V[i, 0]
-        vr2 = ph.V[i, 1]
-        vr3 = ph.V[i, 2]
+        vr1 = cur[a, 3]
+        vr2 = cur[a, 4]
+        vr3 = cur[a, 5]
         vnnr = vr1 * delx + vr2 * dely + vr3 * delz
         vt1 = vr1 - delx * vnnr * rsqinv
         vt2 = vr2 - dely * vnnr * rsqinv
         vt3 = vr3 - delz * vnnr * rsqinv
         arm = 0.5 * r  # contact point midway between equal spheres
-        wr1 = arm * ph.W[i, 0] * rinv
-        wr2 = arm * ph.W[i, 1] * rinv
-        wr3 = arm * ph.W[i, 2] * rinv
+        wr1 = arm * cur[a, 6] * rinv
+        wr2 = arm * cur[a, 7] * rinv
+        wr3 = arm * cur[a, 8] * rinv
         ccel = kn * (1.0 - r) * rinv - damp_n * vnnr * rsqinv
         vtr1 = vt1 - (delz * wr2 - dely * wr3)
         vtr2 = vt2 - (delx * wr3 - delz * wr1)
         vtr3 = vt3 - (dely * wr1 - delx * wr2)
-        sh = bc.slot_shear[i, k]
+        sh0, sh1, sh2 = slot_shear[a, k, 0], slot_shear[a, k, 1], slot_shear[a, k, 2]
         if update:
-            sh[0] += vtr1 * h
-            sh[1] += vtr2 * h
-            sh[2] += vtr3 * h
-            rsht = (sh[0] * delx + sh[1] * dely + sh[2] * delz) * rsqinv
-            sh[0] -= rsht * delx
-            sh[1] -= rsht * dely
-            sh[2] -= rsht * delz
-        fs1 = -kt * sh[0]
-        fs2 = -kt * sh[1]
-        fs3 = -kt * sh[2]
+            sh0 += vtr1 * h
+            sh1 += vtr2 * h
+            sh2 += vtr3 * h
+            rsht = (sh0 * delx + sh1 * dely + sh2 * delz) * rsqinv
+            sh0 -= rsht * delx
+            sh1 -= rsht * dely
+            sh2 -= rsht * delz
+        fs1 = -kt * sh0
+        fs2 = -kt * sh1
+        fs3 = -kt * sh2
         fs = math.sqrt(fs1 * fs1 + fs2 * fs2 + fs3 * fs3)
         fn = mu * abs(ccel * r)
         if fs > fn:
             scale = fn / fs
-            sh[0] *= scale
-            sh[1] *= scale
-            sh[2] *= scale
+            sh0 *= scale
+            sh1 *= scale
+            sh2 *= scale
             fs1 *= scale
             fs2 *= scale
             fs3 *= scale
+        slot_shear[a, k, 0] = sh0
+        slot_shear[a, k, 1] = sh1
+        slot_shear[a, k, 2] = sh2
         fx += delx * ccel + fs1
         fy += dely * ccel + fs2
         fz += delz * ccel + fs3
         tx -= arm * rinv * (dely * fs3 - delz * fs2)
         ty -= arm * rinv * (delz * fs1 - delx * fs3)
         tz -= arm * rinv * (delx * fs2 - dely * fs1)
-        if 1.0 - r > ph.bed_overlap_max[i]:
-            ph.bed_overlap_max[i] = 1.0 - r
-    ph.force[i, 0] += fx
-    ph.force[i, 1] += fy
-    ph.force[i, 2] += fz
-    ph.torque[i, 0] += tx
-    ph.torque[i, 1] += ty
-    ph.torque[i, 2] += tz
+        if 1.0 - r > cs.bed_overlap_max[a]:
+            cs.bed_overlap_max[a] = 1.0 - r
+    ft = cs.ft
+    ft[a, 0] += fx
+    ft[a, 1] += fy
+    ft[a, 2] += fz
+    ft[a, 3] += tx
+    ft[a, 4] += ty
+    ft[a, 5] += tz
     if nb > 0:
-        ph.touched[i] = 1
+        cs.touched[a] = 1
     if update:
         step = bc.ints[1]
         t_now = bc.t0[0] + s * dt
         if nb > 0:
-            if bc.in_bed[i] == 0:
+            if cs.in_bed[a] == 0:
                 # a bed contact begins: an impact; it ends a jump if the grain was airborne
-                st.impacts[i] += 1
-                if bc.last_contact[i] < step - 1:
-                    j = st.jump_buf_n[i]
+                cs.impacts[a] += 1
+                if cs.last_contact[a] < step - 1:
+                    g = cs.gid[a]
+                    j = st.jump_buf_n[g]
                     if j < st.jump_buf.shape[1]:
-                        st.jump_buf[i, j, 0] = st.jump_t0[i]
-                        st.jump_buf[i, j, 1] = px - st.jump_x0[i]
-                        st.jump_buf[i, j, 2] = st.jump_ymax[i] - 0.5
-                        st.jump_buf[i, j, 3] = t_now - st.jump_t0[i]
-                        st.jump_buf_n[i] = j + 1
-                    st.jump_count[i] += 1
+                        st.jump_buf[g, j, 0] = cs.jump_t0[a]
+                        st.jump_buf[g, j, 1] = px - cs.jump_x0[a]
+                        st.jump_buf[g, j, 2] = cs.jump_ymax[a] - 0.5
+                        st.jump_buf[g, j, 3] = t_now - cs.jump_t0[a]
+                        st.jump_buf_n[g] = j + 1
+                    st.jump_count[g] += 1
             # in contact: the next jump starts when it ends
-            st.jump_t0[i] = t_now
-            st.jump_x0[i] = px
-            st.jump_ymax[i] = py
-            bc.last_contact[i] = step
-        bc.in_bed[i] = 1 if nb > 0 else 0
-
-
-@njit(cache=True, error_model="numpy", _nrt=False)
-def _bed_force(i, st, bc, ph, s, dt, h, update):
-    """_bed_force_inl as a call (see _set_path)."""
-    _bed_force_inl(i, st, bc, ph, s, dt, h, update)
-
-
-@njit(cache=True, parallel=True)
-def _forces(x0w, st, bc, model, cl, s, dt, h, update, ph, first, last):
-    pos, vel, spin = st.pos, st.vel, st.spin
-    box, per = cl.grid.box, cl.grid.periodic
-    nbr, nbr_count, shear, touch = cl.nbr, cl.nbr_count, cl.shear, cl.touch
-    collisions, max_overlap, n_touch = cl.collisions, cl.max_overlap, cl.n_touch
-    act = ph.act
-    for q in prange(first, last):
-        i = act[q]
-        _grain_force(i, x0w, pos, vel, spin, model, box, per, nbr, nbr_count, shear, touch, collisions,
-                     max_overlap, n_touch, s, dt, h, update, ph)
-        _bed_force(i, st, bc, ph, s, dt, h, update)
-
-
-@njit(cache=True, error_model="numpy", _nrt=False)
-def _wake_up(x0w, st, bc, model, cl, s, dt, h, update, ph, first):
-    """Activate every non-active grain touched by an active one (their deviation is
-    exactly zero until now) and give them their forces at this sub-step; repeat for the
-    grains those touch. ``first``: active-list entries before it were evaluated."""
-    pos, vel, spin = st.pos, st.vel, st.spin
-    g = cl.grid
-    d2 = model.diameter * model.diameter
-    lo = first
-    hi = ph.n_act[0]
-    scan_from = 0
-    while True:
-        added = 0
-        start = ph.n_act[0]
-        for q in range(scan_from, hi):
-            i = ph.act[q]
-            if ph.wake[i] == 0:
-                continue
-            ph.wake[i] = 0
-            for k in range(cl.nbr_count[i]):
-                j = cl.nbr[i, k]
-                if ph.active[j] != 0:
-                    continue
-                xj, yj, zj, _, _, _, _, _, _ = _state_of(x0w, pos, vel, spin, j, s, dt, ph)
-                dxx = min_image(ph.P[i, 0] - xj, g.box[0], g.periodic[0])
-                dyy = min_image(ph.P[i, 1] - yj, g.box[1], g.periodic[1])
-                dzz = min_image(ph.P[i, 2] - zj, g.box[2], g.periodic[2])
-                if dxx * dxx + dyy * dyy + dzz * dzz < d2:
-                    for a in range(3):
-                        ph.dx[j, a] = 0.0
-                        ph.dv[j, a] = 0.0
-                        ph.dw[j, a] = 0.0
-                        ph.force[j, a] = 0.0
-                        ph.torque[j, a] = 0.0
-                    _set_path(x0w, pos, vel, spin, j, s, dt, ph)
-                    ph.active[j] = 1
-                    ph.dev_max[j] = 0.0
-                    ph.act[ph.n_act[0]] = j
-                    ph.n_act[0] += 1
-                    added += 1
-        if added == 0:
-            break
-        ph.counters[2] += added
-        for q in range(start, ph.n_act[0]):
-            _grain_force(ph.act[q], x0w, pos, vel, spin, model, g.box, g.periodic, cl.nbr, cl.nbr_count, cl.shear,
-                         cl.touch, cl.collisions, cl.max_overlap, cl.n_touch, s, dt, h, update, ph)
-            _bed_force(ph.act[q], st, bc, ph, s, dt, h, update)
-        scan_from = start
-        hi = ph.n_act[0]
-    return lo
+            cs.jump_t0[a] = t_now
+            cs.jump_x0[a] = px
+            cs.jump_ymax[a] = py
+            cs.last_contact[a] = step
+        cs.in_bed[a] = 1 if nb > 0 else 0
 
 
 @njit(cache=True, parallel=True)
@@ -632,11 +658,9 @@ def _reach(x0w, pos, vel, dt, cl, ph):
     box, per, ref = cl.grid.box, cl.grid.periodic, cl.ref_pos
     # arrays unpacked before the parallel loop: Numba 0.68 drops writes made in a prange
     # body through a named tuple's arrays (integrator.py)
-    active, touched, wake, reach, worst = ph.active, ph.touched, ph.wake, ph.reach, ph.ref_bound
+    active, reach, worst = ph.active, ph.reach, ph.ref_bound
     for i in prange(n):
         active[i] = 0
-        touched[i] = 0
-        wake[i] = 0
         ch = 0.0
         b0 = 0.0
         b1 = 0.0
@@ -656,6 +680,7 @@ def _reach(x0w, pos, vel, dt, cl, ph):
         reach[i] = math.sqrt(ch) + bulge
         worst[i] = math.sqrt(max(r0, r1)) + bulge
     return worst.max() if n > 0 else 0.0  # noqa: the reduction reads the filled array
+
 
 
 @njit(cache=True)
@@ -735,120 +760,310 @@ def _margins(x0w, pos, reach, margin):
         margin[i] = reach[i] + (2.0 * reach[i] if pos[i, 1] < 0.5 else 0.0)
 
 
+
 @njit(cache=True, error_model="numpy", _nrt=False)
-def _substep_serial(x0w, st, bc, model, cl, ph, s_next, dt, h):
-    """One sub-step (kick, drift, forces, wake-ups, kick) without parallel loops: for a
-    few active grains a parallel launch costs more than the work."""
-    pos, vel, spin = st.pos, st.vel, st.spin
-    m = ph.n_act[0]
-    inv_m = 1.0 / model.mass
-    inv_i = 1.0 / model.inertia
-    for q in range(m):
-        i = ph.act[q]
-        for a in range(3):
-            ph.dv[i, a] += 0.5 * h * ph.force[i, a] * inv_m
-            ph.dw[i, a] += 0.5 * h * ph.torque[i, a] * inv_i
-            ph.dx[i, a] += h * ph.dv[i, a]
-        dd = ph.dx[i, 0] ** 2 + ph.dx[i, 1] ** 2 + ph.dx[i, 2] ** 2
-        if dd > ph.dev_max[i]:
-            ph.dev_max[i] = dd
-        _set_path_inl(x0w, pos, vel, spin, i, s_next, dt, ph)
-    g = cl.grid
-    for q in range(m):
-        i = ph.act[q]
-        _grain_force_inl(i, x0w, pos, vel, spin, model, g.box, g.periodic, cl.nbr, cl.nbr_count, cl.shear,
-                         cl.touch, cl.collisions, cl.max_overlap, cl.n_touch, s_next, dt, h, True, ph)
-        _bed_force_inl(i, st, bc, ph, s_next, dt, h, True)
-    _wake_up(x0w, st, bc, model, cl, s_next, dt, h, True, ph, 0)
-    for q in range(ph.n_act[0]):
-        i = ph.act[q]
-        for a in range(3):
-            ph.dv[i, a] += 0.5 * h * ph.force[i, a] * inv_m
-            ph.dw[i, a] += 0.5 * h * ph.torque[i, a] * inv_i
-
-
-PARALLEL_FROM = 1 << 62  # active grains from which sub-steps run in parallel: never (below)
-
-
-@njit(cache=True, parallel=True)
-def _kick_drift(x0w, pos, vel, spin, model, ph, s_next, dt, h, first, last):
-    inv_m = 1.0 / model.mass
-    inv_i = 1.0 / model.inertia
-    act, dv, dw, dx, force, torque, dev_max = ph.act, ph.dv, ph.dw, ph.dx, ph.force, ph.torque, ph.dev_max
-    for q in prange(first, last):
-        i = act[q]
-        for a in range(3):
-            dv[i, a] += 0.5 * h * force[i, a] * inv_m
-            dw[i, a] += 0.5 * h * torque[i, a] * inv_i
-            dx[i, a] += h * dv[i, a]
-        m = dx[i, 0] ** 2 + dx[i, 1] ** 2 + dx[i, 2] ** 2
-        if m > dev_max[i]:
-            dev_max[i] = m
-        _set_path(x0w, pos, vel, spin, i, s_next, dt, ph)
-
-
-@njit(cache=True, parallel=True)
-def _kick(model, ph, h, first, last):
-    inv_m = 1.0 / model.mass
-    inv_i = 1.0 / model.inertia
-    act, dv, dw, force, torque = ph.act, ph.dv, ph.dw, ph.force, ph.torque
-    for q in prange(first, last):
-        i = act[q]
-        for a in range(3):
-            dv[i, a] += 0.5 * h * force[i, a] * inv_m
-            dw[i, a] += 0.5 * h * torque[i, a] * inv_i
-
-
-@njit(cache=True, parallel=True)
-def _apply(st, x0w, cl, ph, skin_half):
-    """End of the phase: deviations into the state of grains that had a contact; fluid
-    re-sampled and Basset history restarted for them (module docstring). Returns the
-    active grains whose path may have left the list's reach (overruns)."""
-    over = np.zeros(ph.n_act[0], np.int64)
-    act, bound, dev_max, touched, dx, dv, dw = ph.act, ph.ref_bound, ph.dev_max, ph.touched, ph.dx, ph.dv, ph.dw
-    pos, vel, spin, fresh, meta, ymax = st.pos, st.vel, st.spin, st.fresh, st.hist_meta, st.jump_ymax
-    for q in prange(ph.n_act[0]):
-        i = act[q]
-        if bound[i] + math.sqrt(dev_max[i]) > skin_half:
-            over[q] = 1
-        if touched[i] == 0:
+def _forces(cs, st, bc, model, box, per, s, dt, h, update):
+    """Forces on every active member at s; returns how many touched a member that was
+    not active (to be woken)."""
+    woke = 0
+    active = cs.active
+    for a in range(cs.n[0]):
+        if active[a] == 0:
             continue
-        for a in range(3):
-            pos[i, a] += dx[i, a]
-            vel[i, a] += dv[i, a]
-            spin[i, a] += dw[i, a]
-        fresh[i] = 0
-        meta[i, META_COUNT] = 0
-        if pos[i, 1] > ymax[i]:  # the bed pass skips the grains sub-stepped here
-            ymax[i] = pos[i, 1]
-    return over.sum()
+        _grain_force(a, cs, model, box, per, s, dt, h, update)
+        _bed_force(a, cs, st, bc, s, dt, h, update)
+        woke += cs.wake[a]
+    return woke
 
 
 @njit(cache=True, error_model="numpy", _nrt=False)
-def _start_grains(x0w, pos, vel, spin, ph, cand, ptr, before, s_now, dt):
-    """Append the candidates cand[ptr:] with start < ``before`` (start ≤ 0 when
-    ``before`` is 0) to the active list at step fraction s_now: zero deviation and force,
-    on their free-flight path. Returns the new pointer."""
+def _kick_drift_forces(cs, st, bc, model, box, per, s_next, dt, h):
+    """First half of a sub-step: half kick, drift (the active members, in member order:
+    sequential memory), forces at s_next. Returns the count of _forces."""
+    inv_m = 1.0 / model.mass
+    inv_i = 1.0 / model.inertia
+    active, dev, ft, dev_max = cs.active, cs.dev, cs.ft, cs.dev_max
+    for a in range(cs.n[0]):
+        if active[a] == 0:
+            continue
+        for c in range(3):
+            dev[a, 3 + c] += 0.5 * h * ft[a, c] * inv_m
+            dev[a, 6 + c] += 0.5 * h * ft[a, 3 + c] * inv_i
+            dev[a, c] += h * dev[a, 3 + c]
+        dd = dev[a, 0] ** 2 + dev[a, 1] ** 2 + dev[a, 2] ** 2
+        if dd > dev_max[a]:
+            dev_max[a] = dd
+        _set_path(cs, a, s_next, dt)
+    return _forces(cs, st, bc, model, box, per, s_next, dt, h, True)
+
+
+@njit(cache=True, error_model="numpy", _nrt=False)
+def _kick(cs, model, h):
+    """Second half kick of a sub-step."""
+    inv_m = 1.0 / model.mass
+    inv_i = 1.0 / model.inertia
+    active, dev, ft = cs.active, cs.dev, cs.ft
+    for a in range(cs.n[0]):
+        if active[a] == 0:
+            continue
+        for c in range(3):
+            dev[a, 3 + c] += 0.5 * h * ft[a, c] * inv_m
+            dev[a, 6 + c] += 0.5 * h * ft[a, 3 + c] * inv_i
+
+
+@njit(cache=True, error_model="numpy", _nrt=False)
+def _activate(cs, a, s, dt):
+    """Member a joins the sub-steps at s: zero deviation and force, on its free-flight path."""
+    for c in range(9):
+        cs.dev[a, c] = 0.0
+    for c in range(6):
+        cs.ft[a, c] = 0.0
+    cs.dev_max[a] = 0.0
+    _set_path(cs, a, s, dt)
+    cs.active[a] = 1
+    cs.n_act[0] += 1
+
+
+@njit(cache=True, error_model="numpy", _nrt=False)
+def _join(cs, cand, ptr, before, s_now, dt):
+    """Activate the candidates cand[ptr:] (member indices by start) with start < ``before``
+    (start ≤ 0 when ``before`` is 0) at step fraction s_now. Returns the new pointer."""
     while ptr < cand.shape[0]:
-        i = cand[ptr]
-        t = ph.start[i]
+        a = cand[ptr]
+        t = cs.start[a]
         if not (t < before or (before == 0.0 and t <= 0.0)):
             break
         ptr += 1
-        if ph.active[i] != 0:  # woken earlier
-            continue
-        for a in range(3):
-            ph.dx[i, a] = 0.0
-            ph.dv[i, a] = 0.0
-            ph.dw[i, a] = 0.0
-            ph.force[i, a] = 0.0
-            ph.torque[i, a] = 0.0
-        ph.dev_max[i] = 0.0
-        _set_path_inl(x0w, pos, vel, spin, i, s_now, dt, ph)
-        ph.active[i] = 1
-        ph.act[ph.n_act[0]] = i
-        ph.n_act[0] += 1
+        if cs.active[a] == 0:  # else woken earlier
+            _activate(cs, a, s_now, dt)
     return ptr
+
+
+@njit(cache=True, inline="always")
+def _set_member(cs, a, g, x0w, pos, vel, spin, start):
+    """Member a is grain g: its free-flight path, nothing else yet."""
+    cs.gid[a] = g
+    for c in range(3):
+        cs.path[a, c] = x0w[g, c]
+        cs.path[a, 3 + c] = x0w[g, 3 + c]
+        cs.path[a, 6 + c] = x0w[g, 6 + c]
+        cs.path[a, 9 + c] = pos[g, c]
+        cs.path[a, 12 + c] = vel[g, c]
+        cs.path[a, 15 + c] = spin[g, c]
+    cs.start[a] = start[g]
+    cs.active[a] = 0
+    cs.wake[a] = 0
+    cs.touched[a] = 0
+    cs.has_row[a] = 0
+    cs.rs[a] = 0
+    cs.rc[a] = 0
+
+
+@njit(cache=True, inline="always")
+def _set_row(cs, a, st, cl, bc, ph):
+    """Member a's neighbour row (all its neighbours must be members), contact history and
+    the state the sub-steps may change, copied in (room must exist)."""
+    g = cs.gid[a]
+    r0 = cs.n_rows[0]
+    m = cl.nbr_count[g]
+    cs.rs[a] = r0
+    cs.rc[a] = m
+    for k in range(m):
+        cs.nbr[r0 + k] = ph.loc[cl.nbr[g, k]]
+        cs.touch[r0 + k] = cl.touch[g, k]
+        for c in range(3):
+            cs.shear[r0 + k, c] = cl.shear[g, k, c]
+    cs.n_rows[0] = r0 + m
+    cs.has_row[a] = 1
+    cs.collisions[a] = cl.collisions[g]
+    cs.max_overlap[a] = cl.max_overlap[g]
+    cs.n_touch[a] = cl.n_touch[g]
+    cs.contact_substeps[a] = ph.contact_substeps[g]
+    cs.overlap_sum[a] = ph.overlap_sum[g]
+    cs.bed_overlap_max[a] = ph.bed_overlap_max[g]
+    for k in range(BED_SLOTS):
+        cs.slot_id[a, k] = bc.slot_id[g, k]
+        for c in range(3):
+            cs.slot_c[a, k, c] = bc.slot_c[g, k, c]
+            cs.slot_shear[a, k, c] = bc.slot_shear[g, k, c]
+    cs.in_bed[a] = bc.in_bed[g]
+    cs.last_contact[a] = bc.last_contact[g]
+    cs.impacts[a] = st.impacts[g]
+    cs.jump_t0[a] = st.jump_t0[g]
+    cs.jump_x0[a] = st.jump_x0[g]
+    cs.jump_ymax[a] = st.jump_ymax[g]
+
+
+@njit(cache=True)
+def _gather(x0w, st, cl, bc, ph):
+    """The SubstepSet of this phase: the candidates (start ≤ 1) with their rows and their
+    list neighbours, numbered in the list's cell order. Returns it and the candidates
+    (member indices) sorted by start."""
+    n = x0w.shape[0]
+    loc, start, nbr, nbr_count = ph.loc, ph.start, cl.nbr, cl.nbr_count
+    members = 0
+    rows = 0
+    n_cand = 0
+    for i in range(n):
+        if start[i] <= 1.0:
+            n_cand += 1
+            rows += nbr_count[i]
+            if loc[i] < 0:
+                loc[i] = 0
+                members += 1
+            for k in range(nbr_count[i]):
+                j = nbr[i, k]
+                if loc[j] < 0:
+                    loc[j] = 0
+                    members += 1
+    # room for some woken grains' rows and new neighbours (_give_row grows it if needed)
+    cs = _make_set(members + members // 8 + 16, rows + rows // 8 + 8 * nbr.shape[1])
+    order = cl.order
+    a = 0
+    for q in range(n):
+        g = order[q]
+        if loc[g] >= 0:
+            loc[g] = a
+            cs.gid[a] = g
+            a += 1
+    cs.n[0] = a
+    pos, vel, spin = st.pos, st.vel, st.spin
+    cand = np.empty(n_cand, np.int64)
+    key = np.empty(n_cand)
+    m = 0
+    for a in range(cs.n[0]):
+        g = cs.gid[a]
+        _set_member(cs, a, g, x0w, pos, vel, spin, start)
+        if start[g] <= 1.0:
+            _set_row(cs, a, st, cl, bc, ph)
+            cand[m] = a
+            key[m] = start[g]
+            m += 1
+    return cs, cand[np.argsort(key, kind="mergesort")]
+
+
+@njit(cache=True)
+def _give_row(cs, a, x0w, st, cl, bc, ph):
+    """A row for member a (a woken list neighbour): its neighbours that are not members
+    yet are appended first. Returns the (possibly grown) set."""
+    g = cs.gid[a]
+    m = cl.nbr_count[g]
+    cs = _grow(cs, cs.n[0] + m, cs.n_rows[0] + m)
+    for k in range(m):
+        j = cl.nbr[g, k]
+        if ph.loc[j] < 0:
+            b = cs.n[0]
+            ph.loc[j] = b
+            cs.n[0] = b + 1
+            _set_member(cs, b, j, x0w, st.pos, st.vel, st.spin, ph.start)
+    _set_row(cs, a, st, cl, bc, ph)
+    return cs
+
+
+@njit(cache=True)
+def _wake_up(cs, x0w, st, bc, model, cl, ph, s, dt, h, update):
+    """Activate every member not active that an active one touches (its deviation is
+    exactly zero until now) and give it its forces at this sub-step; repeat for the
+    members those touch. Returns the (possibly grown) set."""
+    box, per = cl.grid.box, cl.grid.periodic
+    d2 = model.diameter * model.diameter
+    lo = 0
+    hi = 0
+    first_round = True
+    while True:
+        # members flagged in this round: all active ones at first, then the newly woken
+        q_new = hi
+        n_scan = cs.n[0] if first_round else hi - lo
+        for t in range(n_scan):
+            a = t if first_round else cs.queue[lo + t]
+            if cs.active[a] == 0 or cs.wake[a] == 0:
+                continue
+            cs.wake[a] = 0
+            for k in range(cs.rs[a], cs.rs[a] + cs.rc[a]):
+                b = cs.nbr[k]
+                if cs.active[b] != 0:
+                    continue
+                xj, yj, zj, _, _, _, _, _, _ = _state_of(cs, b, s, dt)
+                dxx = min_image(cs.cur[a, 0] - xj, box[0], per[0])
+                dyy = min_image(cs.cur[a, 1] - yj, box[1], per[1])
+                dzz = min_image(cs.cur[a, 2] - zj, box[2], per[2])
+                if dxx * dxx + dyy * dyy + dzz * dzz < d2:
+                    cs.active[b] = 1  # claimed: activated below
+                    cs.queue[q_new] = b
+                    q_new += 1
+        first_round = False
+        if q_new == hi:
+            break
+        ph.counters[2] += q_new - hi
+        for t in range(hi, q_new):
+            b = cs.queue[t]
+            if cs.has_row[b] == 0:
+                cs = _give_row(cs, b, x0w, st, cl, bc, ph)
+            cs.active[b] = 0
+            _activate(cs, b, s, dt)
+        for t in range(hi, q_new):
+            b = cs.queue[t]
+            _grain_force(b, cs, model, box, per, s, dt, h, update)
+            _bed_force(b, cs, st, bc, s, dt, h, update)
+        lo = hi
+        hi = q_new
+    return cs
+
+
+@njit(cache=True)
+def _scatter(cs, st, cl, bc, ph, skin_half):
+    """End of the phase: what the sub-steps changed back into the grain arrays; for the
+    grains that had a contact the deviations are added, and the fluid re-sampled and
+    the Basset history restarted (module docstring). Marks the sub-stepped grains in
+    ph.active / ph.act and returns those whose path may have left the list's reach
+    (overruns)."""
+    over = 0
+    na = 0
+    pos, vel, spin = st.pos, st.vel, st.spin
+    for a in range(cs.n[0]):
+        g = cs.gid[a]
+        ph.loc[g] = -1
+        if cs.active[a] == 0:
+            continue
+        ph.active[g] = 1
+        ph.act[na] = g
+        na += 1
+        r0 = cs.rs[a]
+        for k in range(cs.rc[a]):
+            cl.touch[g, k] = cs.touch[r0 + k]
+            for c in range(3):
+                cl.shear[g, k, c] = cs.shear[r0 + k, c]
+        cl.collisions[g] = cs.collisions[a]
+        cl.max_overlap[g] = cs.max_overlap[a]
+        cl.n_touch[g] = cs.n_touch[a]
+        ph.contact_substeps[g] = cs.contact_substeps[a]
+        ph.overlap_sum[g] = cs.overlap_sum[a]
+        ph.bed_overlap_max[g] = cs.bed_overlap_max[a]
+        for k in range(BED_SLOTS):
+            bc.slot_id[g, k] = cs.slot_id[a, k]
+            for c in range(3):
+                bc.slot_c[g, k, c] = cs.slot_c[a, k, c]
+                bc.slot_shear[g, k, c] = cs.slot_shear[a, k, c]
+        bc.in_bed[g] = cs.in_bed[a]
+        bc.last_contact[g] = cs.last_contact[a]
+        st.impacts[g] = cs.impacts[a]
+        st.jump_t0[g] = cs.jump_t0[a]
+        st.jump_x0[g] = cs.jump_x0[a]
+        st.jump_ymax[g] = cs.jump_ymax[a]
+        if ph.ref_bound[g] + math.sqrt(cs.dev_max[a]) > skin_half:
+            over += 1
+        if cs.touched[a] == 0:
+            continue
+        for c in range(3):
+            pos[g, c] += cs.dev[a, c]
+            vel[g, c] += cs.dev[a, 3 + c]
+            spin[g, c] += cs.dev[a, 6 + c]
+        st.fresh[g] = 0
+        st.hist_meta[g, META_COUNT] = 0
+        if pos[g, 1] > st.jump_ymax[g]:  # the bed pass skips the grains sub-stepped here
+            st.jump_ymax[g] = pos[g, 1]
+    ph.n_act[0] = na
+    return over
 
 
 @njit(cache=True)
@@ -859,6 +1074,7 @@ def _with_skin(cl, skin):
                        cl.nbr_count2, cl.shear2, cl.touch2, cl.n_touch, cl.collisions, cl.max_overlap, cl.builds)
 
 
+
 @njit(cache=True)
 def soft_contact_phase(st, x0w, model, cl, ph, bc, t0, step, dt, n_sub):
     """Phase 2 of the module docstring for all grains: the free flight (x₀ in ``x0w``
@@ -866,7 +1082,7 @@ def soft_contact_phase(st, x0w, model, cl, ph, bc, t0, step, dt, n_sub):
     with grains and the bed in ``n_sub`` sub-steps. ``ph.active`` says afterwards which
     grains were sub-stepped (their bed is done; the bed pass must skip them). Returns the
     ContactList to keep (it may have been rebuilt)."""
-    pos, vel, spin = st.pos, st.vel, st.spin
+    pos, vel = st.pos, st.vel
     bc.t0[0] = t0
     bc.ints[1] = step
     n = pos.shape[0]
@@ -894,44 +1110,34 @@ def soft_contact_phase(st, x0w, model, cl, ph, bc, t0, step, dt, n_sub):
                 if ph.reach[i] > skin_half:  # still too fast: a contact might be missed
                     ph.counters[1] += 1
     _engage(x0w, pos, model, cl, ph, bc)
-    # candidates, by the time they may first touch something (docstring: who is sub-stepped)
+    ph.n_act[0] = 0
     n_cand = 0
     for i in range(n):
         if ph.start[i] <= 1.0:
             n_cand += 1
-    ph.n_act[0] = 0
     if n_cand == 0:
         return cl
-    cand = np.empty(n_cand, np.int64)
-    key = np.empty(n_cand)
-    m = 0
-    for i in range(n):
-        if ph.start[i] <= 1.0:
-            cand[m] = i
-            key[m] = ph.start[i]
-            m += 1
-    cand = cand[np.argsort(key, kind="mergesort")]
+    # the candidates and their neighbours, in compact cell-ordered arrays (module
+    # docstring, "Memory layout"); candidates join by the time they may first touch
+    # something (docstring: who is sub-stepped)
+    cs, cand = _gather(x0w, st, cl, bc, ph)
+    box, per = cl.grid.box, cl.grid.periodic
     h = dt / n_sub
     # set-up: forces at s = 0 of the grains in contact now, without advancing the
     # tangential springs (their state is that of the previous step's last sub-step)
-    ptr = _start_grains(x0w, pos, vel, spin, ph, cand, 0, 0.0, 0.0, dt)
-    _forces(x0w, st, bc, model, cl, 0.0, dt, h, False, ph, 0, ph.n_act[0])
-    _wake_up(x0w, st, bc, model, cl, 0.0, dt, h, False, ph, 0)
+    ptr = _join(cs, cand, 0, 0.0, 0.0, dt)
+    if _forces(cs, st, bc, model, box, per, 0.0, dt, h, False) > 0:
+        cs = _wake_up(cs, x0w, st, bc, model, cl, ph, 0.0, dt, h, False)
     for k in range(n_sub):
         s_next = (k + 1) / n_sub
         # grains that may touch something before s_next join now (no force at s_k: they
         # cannot be touching anything yet)
-        ptr = _start_grains(x0w, pos, vel, spin, ph, cand, ptr, s_next, k / n_sub, dt)
-        m = ph.n_act[0]
-        ph.counters[3] += m
-        if m < PARALLEL_FROM:
-            _substep_serial(x0w, st, bc, model, cl, ph, s_next, dt, h)
-            continue
-        _kick_drift(x0w, pos, vel, spin, model, ph, s_next, dt, h, 0, m)
-        _forces(x0w, st, bc, model, cl, s_next, dt, h, True, ph, 0, m)
-        _wake_up(x0w, st, bc, model, cl, s_next, dt, h, True, ph, 0)
-        _kick(model, ph, h, 0, ph.n_act[0])
-    over = _apply(st, x0w, cl, ph, skin_half)
+        ptr = _join(cs, cand, ptr, s_next, k / n_sub, dt)
+        ph.counters[3] += cs.n_act[0]
+        if _kick_drift_forces(cs, st, bc, model, box, per, s_next, dt, h) > 0:
+            cs = _wake_up(cs, x0w, st, bc, model, cl, ph, s_next, dt, h, True)
+        _kick(cs, model, h)
+    over = _scatter(cs, st, cl, bc, ph, skin_half)
     if over > 0:
         # a grain may have left the list's reach: look for pairs in contact now that the
         # list does not hold (an actual miss), with fresh cells

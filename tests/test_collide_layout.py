@@ -1,0 +1,67 @@
+"""The contact phase's compact layout (collide.py, "Memory layout"): a grain woken on a
+deflected path gets its neighbour row from the grain arrays, its own neighbours joining
+the compact set; the set grows without losing its contents; bystanders change nothing."""
+import numpy as np
+
+from saltation import contacts as K
+from saltation.collide import _grow, _make_set, make_bed_context, make_contact_phase, soft_contact_phase
+from saltation.integrator import make_state, make_workspace
+from saltation.packed_bed import make_packed_bed
+
+
+def _knock_on(pos0, vel0, steps=3, dt=0.02, n_sub=128):
+    """Grain 1 knocks grain 0 into grain 2 (out of reach of the undeflected paths)."""
+    n = len(pos0)
+    model = K.make_contact_model(5e5, 0.9, 0.2)
+    st = make_state(pos0, vel0, np.zeros((n, 3)), 0.0, 4)
+    ws = make_workspace(n)
+    cl = K.make_contact_list(st.pos, (12.0, 8.0, 12.0), (True, False, True), 1.0, 0.6)
+    ph = make_contact_phase(n)
+    bc = make_bed_context(n, False, make_packed_bed(3.0, 3.0), 0.65, 0.1, 0.5, model.kn, model.kt, 0,
+                          np.full(n, -2, np.int64))
+    for s in range(steps):
+        ws.x0[:, 0:3] = st.pos
+        ws.x0[:, 3:6] = st.vel
+        ws.x0[:, 6:9] = st.spin
+        st.pos[:] += dt * st.vel
+        cl = soft_contact_phase(st, ws.x0, model, cl, ph, bc, s * dt, s, dt, n_sub)
+        assert (ph.loc == -1).all()  # the set is released after each phase
+    return st, cl, ph
+
+
+def test_woken_grain_brings_its_neighbours_and_a_bystander_changes_nothing():
+    pos3 = np.array([[5.0, 3.0, 5.0], [5.0 - 1.05, 3.0, 5.0], [5.0 + 1.0 + 0.1, 3.0, 5.0]])
+    vel3 = np.array([[0.0, 0.0, 0.0], [12.0, 0.0, 0.0], [0.0, 0.0, 0.0]])
+    # grain 3: a list neighbour of grain 2 only (1.3 d to its side), never touched
+    pos4 = np.vstack([pos3, [[6.1, 3.0, 6.3]]])
+    vel4 = np.vstack([vel3, [[0.0, 0.0, 0.0]]])
+    st3, cl3, ph3 = _knock_on(pos3, vel3)
+    st4, cl4, ph4 = _knock_on(pos4, vel4)
+    assert 3 in cl4.nbr[2, :cl4.nbr_count[2]] and 3 not in cl4.nbr[0, :cl4.nbr_count[0]]
+    assert ph3.counters[2] >= 1 and ph4.counters[2] >= 1  # grain 2 was woken
+    assert st3.vel[2, 0] > 1.0
+    np.testing.assert_array_equal(st4.pos[:3], st3.pos)
+    np.testing.assert_array_equal(st4.vel[:3], st3.vel)
+    np.testing.assert_array_equal(st4.spin[:3], st3.spin)
+    np.testing.assert_array_equal(cl4.collisions[:3], cl3.collisions)
+    assert cl4.collisions[3] == 0 and np.all(st4.vel[3] == 0.0)
+    np.testing.assert_allclose(st4.vel.sum(axis=0), vel4.sum(axis=0), atol=1e-9)
+
+
+def test_the_compact_set_grows_without_losing_its_contents():
+    cs = _make_set(3, 5)
+    cs.n[0], cs.n_rows[0] = 3, 5
+    cs.gid[:3] = [7, 2, 9]
+    cs.path[:3] = np.arange(54.0).reshape(3, 18)
+    cs.nbr[:5] = [1, 2, 0, 2, 0]
+    cs.shear[:5] = np.arange(15.0).reshape(5, 3)
+    cs.slot_c[:3] = np.arange(36.0).reshape(3, 4, 3)
+    big = _grow(cs, 10, 4)
+    assert big.gid.shape[0] >= 10 and big.queue.shape[0] == big.gid.shape[0] and big.nbr.shape[0] == 5
+    assert big.n[0] == 3 and big.n_rows[0] == 5
+    np.testing.assert_array_equal(big.gid[:3], [7, 2, 9])
+    np.testing.assert_array_equal(big.path[:3], cs.path[:3])
+    np.testing.assert_array_equal(big.nbr[:5], cs.nbr[:5])
+    np.testing.assert_array_equal(big.shear[:5], cs.shear[:5])
+    np.testing.assert_array_equal(big.slot_c[:3], cs.slot_c[:3])
+    assert _grow(big, 2, 2) is big or _grow(big, 2, 2).gid.shape[0] == big.gid.shape[0]
