@@ -97,6 +97,7 @@ from .clusters import OK, _quat_to_matrix, step_grain
 from .history import META_COUNT
 
 __all__ = ["ClusterContacts", "make_cluster_contacts", "contact_parameters", "substeps", "contact_phase",
+           "build_contact_list",
            "advance_clusters_contacts", "component_forces", "brute_force_pairs", "listed_pairs",
            "point_effective_masses", "DEFAULT_SKIN"]
 
@@ -135,6 +136,7 @@ class ClusterContacts(NamedTuple):
     P: np.ndarray  # (N, 3) pose at the current sub-step
     V: np.ndarray  # (N, 3)
     Om: np.ndarray  # (N, 3)
+    dOm: np.ndarray  # (N, 3) Ω − Ω_f
     rot: np.ndarray  # (N, 3, 3)
     iw: np.ndarray  # (N, 3, 3) world inverse rigid inertia
     cp: np.ndarray  # (K, 3) world component centres
@@ -210,7 +212,7 @@ def make_cluster_contacts(st, par, capacity: int = 32) -> ClusterContacts:
         np.zeros((n, PARTNERS), np.int64), np.zeros(n, np.int64), np.zeros((n, PARTNERS), np.int64),
         np.zeros(n, np.uint8), np.zeros(n, np.int64), np.zeros(1, np.int64), np.zeros(n, np.uint8),
         np.zeros(n), np.zeros(n), np.zeros((n, 13)), z3(n), z3(n), z3(n), np.zeros((n, 4)), np.zeros(n),
-        z3(n), z3(n), z3(n), np.zeros((n, 3, 3)), np.zeros((n, 3, 3)), z3(kt), z3(n), z3(n),
+        z3(n), z3(n), z3(n), z3(n), np.zeros((n, 3, 3)), np.zeros((n, 3, 3)), z3(kt), z3(n), z3(n),
         np.zeros(n, np.int64), np.zeros(n), np.zeros(n), np.zeros(n, np.int64), np.zeros(N_COUNTERS, np.int64))
 
 
@@ -529,11 +531,32 @@ def _build_list(st, cc):
     return ClusterContacts(cc.par, cc.grain_of, cc.rho, cc.rnorm, nbr2, cnt2, shear2, spare_nbr, spare_cnt,
                            spare_shear, cc.partners, cc.n_partners, cc.new_partners, cc.active, cc.act, cc.n_act,
                            cc.touched, cc.reach, cc.phi, cc.x1, cc.dx, cc.dv, cc.dL, cc.dq, cc.dev, cc.P, cc.V,
-                           cc.Om, cc.rot, cc.iw, cc.cp, cc.force, cc.torque, cc.collisions, cc.max_overlap,
+                           cc.Om, cc.dOm, cc.rot, cc.iw, cc.cp, cc.force, cc.torque, cc.collisions, cc.max_overlap,
                            cc.overlap_sum, cc.contact_substeps, cc.counters)
 
 
 # ----------------------------------------------------------------------------- poses and forces
+@njit(cache=True, inline="always")
+def _free_momentum(ib, f0, f1, f2, f3, o0, o1, o2):
+    """R I_b Rᵀ Ω for the orientation (f0..f3) and world angular velocity (o0, o1, o2)."""
+    r00 = 1.0 - 2.0 * (f2 * f2 + f3 * f3)
+    r01 = 2.0 * (f1 * f2 - f0 * f3)
+    r02 = 2.0 * (f1 * f3 + f0 * f2)
+    r10 = 2.0 * (f1 * f2 + f0 * f3)
+    r11 = 1.0 - 2.0 * (f1 * f1 + f3 * f3)
+    r12 = 2.0 * (f2 * f3 - f0 * f1)
+    r20 = 2.0 * (f1 * f3 - f0 * f2)
+    r21 = 2.0 * (f2 * f3 + f0 * f1)
+    r22 = 1.0 - 2.0 * (f1 * f1 + f2 * f2)
+    b0 = r00 * o0 + r10 * o1 + r20 * o2
+    b1 = r01 * o0 + r11 * o1 + r21 * o2
+    b2 = r02 * o0 + r12 * o1 + r22 * o2
+    c0 = ib[0, 0] * b0 + ib[0, 1] * b1 + ib[0, 2] * b2
+    c1 = ib[1, 0] * b0 + ib[1, 1] * b1 + ib[1, 2] * b2
+    c2 = ib[2, 0] * b0 + ib[2, 1] * b1 + ib[2, 2] * b2
+    return (r00 * c0 + r01 * c1 + r02 * c2, r10 * c0 + r11 * c1 + r12 * c2, r20 * c0 + r21 * c1 + r22 * c2)
+
+
 @njit(cache=True, parallel=True)
 def _poses(st, w, cc, s, dt):
     """Pose of every active grain at σ = s on its free path plus deviation, its world
@@ -596,9 +619,20 @@ def _pose_one(st, w, cc, p, s, dt):
                 for b in range(3):
                     acc += rot[i, a] * ib[a, b] * rot[j, b]
             iw[i, j] = acc
+    # Ω = I_w(Q)⁻¹ (L_f + δL): the free path's angular momentum is kept when the body is
+    # turned by δq (so the kicks alone change the total angular momentum)
+    o0 = (1.0 - s) * x0[10] + s * x1[10]
+    o1 = (1.0 - s) * x0[11] + s * x1[11]
+    o2 = (1.0 - s) * x0[12] + s * x1[12]
+    l0, l1, l2 = _free_momentum(st.inertia[p], f0, f1, f2, f3, o0, o1, o2)
+    l0 += cc.dL[p, 0]
+    l1 += cc.dL[p, 1]
+    l2 += cc.dL[p, 2]
     for i in range(3):
-        cc.Om[p, i] = (1.0 - s) * x0[10 + i] + s * x1[10 + i] \
-            + iw[i, 0] * cc.dL[p, 0] + iw[i, 1] * cc.dL[p, 1] + iw[i, 2] * cc.dL[p, 2]
+        cc.Om[p, i] = iw[i, 0] * l0 + iw[i, 1] * l1 + iw[i, 2] * l2
+    cc.dOm[p, 0] = cc.Om[p, 0] - o0
+    cc.dOm[p, 1] = cc.Om[p, 1] - o1
+    cc.dOm[p, 2] = cc.Om[p, 2] - o2
     for k in range(st.cstart[p], st.cstart[p + 1]):
         r0, r1, r2 = st.r_body[k, 0], st.r_body[k, 1], st.r_body[k, 2]
         for i in range(3):
@@ -756,10 +790,7 @@ def _drift(st, cc, h, half_skin):
 def _drift_one(st, cc, p, h, half_skin):
     iw = cc.iw[p]
     rot = cc.rot[p]
-    dL = cc.dL[p]
-    w0 = iw[0, 0] * dL[0] + iw[0, 1] * dL[1] + iw[0, 2] * dL[2]
-    w1 = iw[1, 0] * dL[0] + iw[1, 1] * dL[1] + iw[1, 2] * dL[2]
-    w2 = iw[2, 0] * dL[0] + iw[2, 1] * dL[1] + iw[2, 2] * dL[2]
+    w0, w1, w2 = cc.dOm[p, 0], cc.dOm[p, 1], cc.dOm[p, 2]
     # body frame of the free path: R_f = R(Q) R(δq)ᵀ; R_fᵀ δΩ = R(δq) R(Q)ᵀ δΩ
     b0 = rot[0, 0] * w0 + rot[1, 0] * w1 + rot[2, 0] * w2
     b1 = rot[0, 1] * w0 + rot[1, 1] * w1 + rot[2, 1] * w2
@@ -809,10 +840,14 @@ def _finish_one(st, w, cc, p):
                     for b in range(3):
                         acc += rot[i, a] * ib[a, b] * rot[j, b]
                 iw[i, j] = acc
+        l0, l1, l2 = _free_momentum(st.inertia[p], x1[6], x1[7], x1[8], x1[9], x1[10], x1[11], x1[12])
+        l0 += cc.dL[p, 0]
+        l1 += cc.dL[p, 1]
+        l2 += cc.dL[p, 2]
         for i in range(3):
             st.pos[p, i] = x1[i] + cc.dx[p, i]
             st.vel[p, i] = x1[3 + i] + cc.dv[p, i]
-            st.omega[p, i] = x1[10 + i] + iw[i, 0] * cc.dL[p, 0] + iw[i, 1] * cc.dL[p, 1] + iw[i, 2] * cc.dL[p, 2]
+            st.omega[p, i] = iw[i, 0] * l0 + iw[i, 1] * l1 + iw[i, 2] * l2
         # the fluid samples are stale and the contact is impulsive: re-sample, restart
         # the Basset memory (as a bed impact)
         st.fresh[p] = 0
@@ -828,9 +863,10 @@ def _finish_one(st, w, cc, p):
 
 
 @njit(cache=True)
-def contact_phase(st, w, cc, dt, n_sub):
-    """Grain–grain contacts of one hydrodynamic step of length dt, after the free flight
-    of every grain (module docstring); returns the ClusterContacts to keep."""
+def build_contact_list(st, w, cc, dt):
+    """Steps 2–3 set-up of the contact phase (module docstring): reach of every grain's
+    free path from w.x0 (start) to the state st (end), active grains, their poses at
+    σ = 0 and the component neighbour list. Returns the ClusterContacts to use."""
     n = st.pos.shape[0]
     _reach(st, w, cc, dt)
     na = _engage(st, w, cc)
@@ -842,7 +878,6 @@ def contact_phase(st, w, cc, dt, n_sub):
                 cc.nbr_count[a] = 0
     if na == 0:
         return cc
-    cc.counters[3] += na
     for q in range(na):
         p = cc.act[q]
         cc.touched[p] = 0
@@ -854,10 +889,21 @@ def contact_phase(st, w, cc, dt, n_sub):
         cc.dq[p, 1] = 0.0
         cc.dq[p, 2] = 0.0
         cc.dq[p, 3] = 0.0
+    _poses(st, w, cc, 0.0, dt)
+    return _build_list(st, cc)
+
+
+@njit(cache=True)
+def contact_phase(st, w, cc, dt, n_sub):
+    """Grain–grain contacts of one hydrodynamic step of length dt, after the free flight
+    of every grain (module docstring); returns the ClusterContacts to keep."""
+    cc = build_contact_list(st, w, cc, dt)
+    na = cc.n_act[0]
+    if na == 0:
+        return cc
+    cc.counters[3] += na
     h = dt / n_sub
     half_skin = 0.5 * cc.par[4]
-    _poses(st, w, cc, 0.0, dt)
-    cc = _build_list(st, cc)
     component_forces(st, cc, h, False)
     for s in range(n_sub):
         _kick(st, cc, 0.5 * h)

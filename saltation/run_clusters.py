@@ -40,8 +40,9 @@ import numba
 import numpy as np
 import pandas as pd
 
-from . import clusters, history, shapes
+from . import cluster_contacts, clusters, history, shapes
 from .config import Case, CaseError, dump_toml
+from .contacts import contact_model_from_case
 from .forces import CM, make_coefficients
 from .initial import Y_RANGE, initial_conditions
 from .writers import ClusterTrackWriter, JumpWriter, ParaViewWriter, write_json
@@ -52,17 +53,23 @@ SERIAL_BELOW = 2000
 CLASS_IDS = {c: i for i, c in enumerate(shapes.CLASSES)}  # track column class_id
 MIN_START_BOTTOM = Y_RANGE[0] - 0.5  # d: lowest start of a sphere's bottom (initial.py)
 JUMP_CAPACITY = 16
+SKIN_SPEED = 20.0  # u*: default contact skin covers a grain at this speed over one step, ×1.2 (as stepping.py)
+LIST_HEIGHT = (4.0, 60.0)  # d: bounds of the contact cells' height (grains above share its top layer)
+
+
+def default_skin(dt_particle: float) -> float:
+    """Contact skin (d) when collisions.skin is absent: stepping.default_skin's rule."""
+    return max(0.1, 2.0 * 1.2 * SKIN_SPEED * dt_particle)
 
 
 def check_case(case: Case) -> None:
     """The parts of a case a bonded-sphere run cannot do: CaseError naming the key."""
     n = int(case.n_particles or 1)
-    if case.collisions.model != "off" and n > 1:
+    if case.collisions.model == "hard" and n > 1:
         raise CaseError(
-            f'collisions.model = "{case.collisions.model}" is not available with particle.shape = '
-            f'"{case.particle.shape}": grain–grain contacts between bonded-sphere grains are not '
-            f'implemented (run_clusters.py); set collisions.model = "off" (--set collisions.model=off)',
-            "collisions", "model")
+            f'collisions.model = "hard" is not available with particle.shape = "{case.particle.shape}": '
+            f'bonded-sphere grains have soft grain–grain contacts only (cluster_contacts.py); set '
+            f'collisions.model = "soft" or "off" (--set collisions.model=soft)', "collisions", "model")
     if case.bed.model != "virtual":
         raise CaseError(
             f'bed.model = "{case.bed.model}" is not available with particle.shape = '
@@ -132,6 +139,10 @@ class ClusterSimulation:
         self.top_d = float(flow.y[-1]) / self.re_star
         self.classes, self.axes, self.composites = draw_grains(case, self.n)
         self.class_id = np.array([CLASS_IDS[c] for c in self.classes], dtype=np.int8)
+        self.contacts = case.collisions.model == "soft" and self.n > 1
+        self.cc = None
+        self.n_sub = 1
+        self.timers = np.zeros(2)
 
     # ------------------------------------------------------------------ set-up
     def threads(self) -> int:
@@ -143,6 +154,8 @@ class ClusterSimulation:
     def _initial_state(self):
         c = self.case
         pos, vel, spin = initial_conditions(self.n, self.domain_d, c.run.seed, c.run.release_height)
+        if self.contacts:
+            pos = self._centres_apart(pos)
         quat = random_quaternions(self.n, np.random.default_rng([int(c.run.seed), 7]))
         st = clusters.make_cluster_state(self.composites, pos, vel, quat, spin, 0.0, self.n_window,
                                          R=c.submerged_specific_gravity, Cm=self.coef[CM],
@@ -153,6 +166,59 @@ class ClusterSimulation:
             st.pos[:, 1] += lift
             st.jump_ymax[:] = clusters.lowest_points(st)
         return st
+
+    def _contact_setup(self, st):
+        """Grain–grain contact state (cluster_contacts.py): the case's k_n, k_t, e, f in
+        the composite units (k_n · (1+R)π/6, module docstring there), skin, cells."""
+        c = self.case
+        cc = c.collisions
+        kn = contact_model_from_case(c).kn * (1.0 + c.submerged_specific_gravity) * math.pi / 6.0
+        self.skin = float(cc.skin) if cc.skin is not None else default_skin(self.dt)
+        height = min(max(self.top_d, LIST_HEIGHT[0]), LIST_HEIGHT[1])
+        lx, lz = self.domain_d
+        self.kn = kn
+        par = cluster_contacts.contact_parameters(kn, cc.restitution, cc.friction, cc.tangential_stiffness_ratio,
+                                                  self.skin, (lx, height, lz))
+        try:
+            self.cc = cluster_contacts.make_cluster_contacts(st, par)
+        except ValueError as err:
+            raise CaseError(str(err), "run", "domain") from err
+        self.n_sub = cluster_contacts.substeps(st, kn, self.dt, cc.steps_per_contact)
+        self.mu_min = float(cluster_contacts.point_effective_masses(st).min())
+
+    def _advance(self, f, st, w, seed, t0, n):
+        if self.cc is None:
+            return int(clusters.advance_clusters(f, self.coef, self.bed, seed, st, w, self.hist_coef, t0, self.dt,
+                                                 n, self.top_d))
+        done, self.cc = cluster_contacts.advance_clusters_contacts(
+            f, self.coef, self.bed, seed, st, w, self.hist_coef, t0, self.dt, n, self.top_d, self.cc, self.n_sub,
+            self.timers)
+        return int(done)
+
+    def _centres_apart(self, pos):
+        """Start positions for runs with grain–grain contacts: no two bounding spheres
+        (radius ρ = max |r_k| + d_k/2 of the largest grain) overlap, so no components
+        do (an overlapping start would be a violent first contact). Random sequential
+        insertion (contacts.random_gas) in a layer from the usual lowest start (or
+        run.release_height) + ρ up, tall enough for a solid fraction of bounding spheres
+        of SOLID_FRACTION_AT_START (initial.py); x, z as drawn there."""
+        from .contacts import random_gas
+        from .initial import SOLID_FRACTION_AT_START
+
+        c = self.case
+        rho = max(float((np.linalg.norm(g.centres, axis=1) + g.radii).max()) for g in self.composites)
+        lx, lz = self.domain_d
+        gap = 0.02
+        band = max(Y_RANGE[1] - Y_RANGE[0],
+                   self.n * (math.pi / 6.0) * (2.0 * rho) ** 3 / (lx * lz * SOLID_FRACTION_AT_START),
+                   2.0 * rho * (1.0 + gap))
+        placed, _, _ = random_gas(self.n, (lx, band, lz), 2.0 * rho, int(c.run.seed), 0.0, gap)
+        bottom = MIN_START_BOTTOM + rho if c.run.release_height is None else float(c.run.release_height)
+        out = pos.copy()
+        out[:, 0] = placed[:, 0]
+        out[:, 2] = placed[:, 2]
+        out[:, 1] = bottom + placed[:, 1]
+        return out
 
     def _collect_jumps(self, st, writer: JumpWriter, rows: list):
         nb = st.jump_buf_n
@@ -185,6 +251,8 @@ class ClusterSimulation:
         threads = numba.get_num_threads()
         st = self._initial_state()
         w = clusters.make_cluster_work(st)
+        if self.contacts:
+            self._contact_setup(st)
         f = self.flow.arrays
         d, ts = c.particle.diameter, c.time_scale
         jw = JumpWriter(self.out / "jumps.parquet")
@@ -202,8 +270,7 @@ class ClusterSimulation:
         seed = int(c.run.seed)
         wall0 = time.perf_counter()
         t_compile = time.perf_counter()
-        clusters.advance_clusters(f, self.coef, self.bed, seed, st, w, self.hist_coef, 0.0, self.dt, 0,
-                                  self.top_d)
+        self._advance(f, st, w, seed, 0.0, 0)
         compile_s = time.perf_counter() - t_compile
         kernel_s = 0.0
         status = "completed"
@@ -227,8 +294,7 @@ class ClusterSimulation:
                 nxt = min([self.n_steps] + [(step // e + 1) * e for e in every]
                           + [s for s in [var.next_step(step) if var is not None else None] if s is not None])
                 t0 = time.perf_counter()
-                done = int(clusters.advance_clusters(f, self.coef, self.bed, seed, st, w, self.hist_coef,
-                                                     step * self.dt, self.dt, nxt - step, self.top_d))
+                done = self._advance(f, st, w, seed, step * self.dt, nxt - step)
                 kernel_s += time.perf_counter() - t0
                 self._collect_jumps(st, jw, rows)
                 if np.any(st.status == clusters.NOT_FINITE):
@@ -264,7 +330,9 @@ class ClusterSimulation:
     # ------------------------------------------------------------------ outputs
     def _write_particles(self, st):
         """particles.parquet: one row per grain — class, axes (d), component spheres, volume
-        (d³), bed impacts, completed jumps (collisions/max_overlap 0: contacts off)."""
+        (d³), bed impacts, completed jumps, grain–grain collisions begun and the largest
+        component overlap (d) (both 0 with contacts off)."""
+        cc = self.cc
         pd.DataFrame({
             "particle": np.arange(self.n, dtype=np.int32),
             "zingg_class": self.classes,
@@ -273,10 +341,10 @@ class ClusterSimulation:
             "Dl": self.axes[:, 0], "Di": self.axes[:, 1], "Ds": self.axes[:, 2],
             "n_spheres": np.array([g.n_spheres for g in self.composites], dtype=np.int32),
             "volume": np.array([g.volume for g in self.composites]),
-            "collisions": np.zeros(self.n, dtype=np.int64),
+            "collisions": cc.collisions.copy() if cc is not None else np.zeros(self.n, dtype=np.int64),
             "bed_impacts": st.impacts.copy(),
             "jumps": st.jump_count.copy(),
-            "max_overlap": np.zeros(self.n),
+            "max_overlap": cc.max_overlap.copy() if cc is not None else np.zeros(self.n),
         }).to_parquet(self.out / "particles.parquet", index=False)
 
     def _transport(self, rows):
@@ -364,22 +432,14 @@ class ClusterSimulation:
                 "volume_sphere_d3": math.pi / 6.0,
                 "class_ids": CLASS_IDS,
                 "note": "lengths in the nominal diameter d = (Dl Di Ds)^(1/3); concentration counts "
-                        "(pi/6) d^3 per grain; grain-grain contacts off",
+                        "(pi/6) d^3 per grain; grain-grain contacts "
+                        + ("soft, between component spheres" if self.cc is not None else "off"),
             },
             "jumps": _stats(jumps),
             "jumps_by_class": by_class,
-            "collisions": {
-                "model": c.collisions.model, "bed_model": c.bed.model, "particle_particle": 0,
-                "bed": impacts, "per_particle": 0.0, "per_particle_per_unit_time": 0.0 if duration_p else None,
-                "bed_per_particle": impacts / self.n,
-                "bed_per_particle_per_unit_time": impacts / self.n / duration_p if duration_p else None,
-                "units": "per_particle: grain–grain collisions per grain (none: bonded-sphere runs have no "
-                         "grain–grain contacts); unit time = d/u*",
-            },
+            "collisions": self._collisions_summary(st, duration_p),
             "steps_above_flow_top": int(st.above_top.sum()),
-            "timing": {"wall_s": wall, "compile_s": compile_s, "kernel_s": kernel_s, "free_flight_s": kernel_s,
-                       "bed_s": 0.0, "particle_collisions_s": 0.0, "threads": threads,
-                       "note": "bed rebounds are computed inside the free-flight kernel (clusters.step_grain)"},
+            "timing": self._timing(wall, compile_s, kernel_s, threads),
             "particle_steps_per_s": self.n * steps / kernel_s if kernel_s > 0 else None,
             "component_sphere_steps_per_s": float(n_comp.sum()) * steps / kernel_s if kernel_s > 0 else None,
         }
@@ -390,6 +450,67 @@ class ClusterSimulation:
         if tracks is not None and "t_from" in summary["transport"]:
             summary["spin"] = spin_statistics(tracks, summary["transport"]["t_from"], self.class_id)
         return summary
+
+
+    def _collisions_summary(self, st, duration_p):
+        """The ``collisions`` block (keys of stepping.Stepper.collisions_summary)."""
+        c, cc, n = self.case, self.cc, self.n
+        impacts = int(st.impacts.sum())
+        per = cc.collisions if cc is not None else np.zeros(n, np.int64)
+        pairs = int(per.sum()) // 2
+        out = {
+            "model": c.collisions.model if n > 1 else "off", "bed_model": c.bed.model,
+            "particle_particle": pairs, "bed": impacts,
+            "per_particle": 2.0 * pairs / n,
+            "per_particle_per_unit_time": 2.0 * pairs / n / duration_p if duration_p else None,
+            "bed_per_particle": impacts / n,
+            "bed_per_particle_per_unit_time": impacts / n / duration_p if duration_p else None,
+            "units": "per_particle: grain–grain collisions per grain (each collision involves two grains; a "
+                     "collision begins when two grains go from no touching component pair to at least one); "
+                     "unit time = d/u*",
+        }
+        if cc is None:
+            return out
+        sub = int(cc.contact_substeps.sum())
+        h = self.dt / self.n_sub
+        mu = 0.5 * self.mu_min
+        out["soft"] = {
+            "stiffness_N_m": c.collision_stiffness,
+            "kn_particle_units": self.kn,
+            "kn_units": "rho u*^2 d (rho: fluid density; cluster_contacts.py)",
+            "contact_duration_min_particle": math.pi * math.sqrt(mu / self.kn),
+            "substeps_per_step": self.n_sub,
+            "substep_particle": h,
+            "skin_d": self.skin,
+        }
+        out["overlap"] = {
+            "max_over_d": float(cc.max_overlap.max(initial=0.0)),
+            "mean_over_d": float(cc.overlap_sum.sum() / sub) if sub else None,
+            "mean_is": "time-mean overlap of the component-sphere contacts over the sub-steps in contact "
+                       "(d = the nominal diameter Dn)",
+            "component_contact_substeps": sub,
+        }
+        out["contact_phase"] = {
+            "list_builds": int(cc.counters[0]),
+            "overruns": int(cc.counters[1]),
+            "overruns_are": "grain-sub-steps whose contact deviation exceeded half the skin (list rebuilt; "
+                            "a grain that was not sub-stepped could then be reached unseen)",
+            "substepped_grain_substeps": int(cc.counters[2]),
+            "engaged_grain_steps": int(cc.counters[3]),
+        }
+        return out
+
+    def _timing(self, wall, compile_s, kernel_s, threads):
+        if self.cc is None:
+            return {"wall_s": wall, "compile_s": compile_s, "kernel_s": kernel_s, "free_flight_s": kernel_s,
+                    "bed_s": 0.0, "particle_collisions_s": 0.0, "threads": threads,
+                    "note": "bed rebounds are computed inside the free-flight kernel (clusters.step_grain)"}
+        ff, pc = (float(x) for x in self.timers)
+        return {"wall_s": wall, "compile_s": compile_s, "kernel_s": kernel_s, "free_flight_s": ff, "bed_s": 0.0,
+                "particle_collisions_s": pc, "particle_collisions_share": pc / wall if wall > 0 else None,
+                "threads": threads,
+                "note": "bed rebounds are computed inside the free-flight kernel (clusters.step_grain); "
+                        "particle_collisions_s: the whole contact phase (engagement, lists, sub-steps)"}
 
 
 def spin_statistics(tracks: pd.DataFrame, t_from: float, class_id=None) -> dict:

@@ -1,0 +1,192 @@
+"""Soft grain–grain contacts between bonded-sphere grains (saltation.cluster_contacts):
+the one-sphere grain is the sphere contact; an oblique frictional collision of two
+asymmetric grains conserves linear and angular momentum; the cell search misses no pair
+across cell and periodic boundaries; overlaps stay small in a dense mixture run."""
+import math
+
+import numpy as np
+import pytest
+
+from flowfields import profile_dataset
+from saltation import cluster_contacts as ccm
+from saltation import clusters, history, shapes
+from saltation.contacts import advance_granular, make_contact_list, make_contact_model
+from saltation.forces import make_coefficients
+
+R = 1.65
+DT = 0.01
+NW = 10
+KN_SPHERE = 5e5  # m u*²/d² (sphere units): the case default order of magnitude
+KN = KN_SPHERE * (1.0 + R) * math.pi / 6.0  # ρ u*² Dn (composite units)
+BOX = (40.0, 60.0, 40.0)
+
+
+def _vacuum():
+    return make_coefficients(tau_star=1.0, R=R, re_star=10.0, Cm=0.0, weight=False, drag=False, lift=False,
+                             magnus=False, added_mass=False, fluid_acceleration=False, basset=False)
+
+
+def _state(comps, pos, vel, quat=None, omega=None):
+    n = len(comps)
+    q = np.tile([1.0, 0, 0, 0], (n, 1)) if quat is None else quat
+    om = np.zeros((n, 3)) if omega is None else omega
+    st = clusters.make_cluster_state(comps, pos, vel, q, om, 0.0, NW, R=R, Cm=0.0, re_star=10.0, spin_drag=False)
+    return st, clusters.make_cluster_work(st)
+
+
+def _run(st, w, cc, n_sub, steps, dt=DT, record=None):
+    still = profile_dataset("still", y_top_plus=1e6)
+    hc = history.make_history_coefficients(dt, NW)
+    bed = np.array([0.65, 0.1, 0.5])
+    timers = np.zeros(2)
+    for s in range(steps):
+        _, cc = ccm.advance_clusters_contacts(still.arrays, _vacuum(), bed, 0, st, w, hc, s * dt, dt, 1, 1e9, cc,
+                                              n_sub, timers)
+        if record is not None:
+            record(st, cc)
+    return cc
+
+
+def _rigid_momenta(st):
+    """Total linear momentum and angular momentum about the origin (orbital + spin,
+    rigid inertia R I_b Rᵀ Ω)."""
+    p = (st.mass[:, None] * st.vel).sum(axis=0)
+    L = np.zeros(3)
+    for i in range(len(st.mass)):
+        rot = clusters.quat_to_matrix_py(st.quat[i])
+        L += st.mass[i] * np.cross(st.pos[i], st.vel[i]) + rot @ st.inertia[i] @ rot.T @ st.omega[i]
+    return p, L
+
+
+def _kinetic(st):
+    ke = 0.0
+    for i in range(len(st.mass)):
+        rot = clusters.quat_to_matrix_py(st.quat[i])
+        ke += 0.5 * st.mass[i] * st.vel[i] @ st.vel[i] + 0.5 * st.omega[i] @ (rot @ st.inertia[i] @ rot.T) @ st.omega[i]
+    return ke
+
+
+def test_one_sphere_grains_head_on_reproduce_the_sphere_contact():
+    e, f = 0.65, 0.1
+    one = shapes.Composite.from_spheres([[0, 0, 0]], [0.5])
+    pos = np.array([[10.0, 5.0, 10.0], [11.05, 5.0, 10.0]])
+    vel = np.array([[2.0, 0.0, 0.0], [-2.0, 0.0, 0.0]])
+    st, w = _state([one, one], pos, vel)
+    cc = ccm.make_cluster_contacts(st, ccm.contact_parameters(KN, e, f, skin=0.3, box=BOX))
+    n_sub = ccm.substeps(st, KN, DT, 20)
+    p0, _ = _rigid_momenta(st)
+    cc = _run(st, w, cc, n_sub, 10)
+    e_run = -(st.vel[0, 0] - st.vel[1, 0]) / (vel[0, 0] - vel[1, 0])
+    assert e_run == pytest.approx(e, rel=0.02)
+    p1, _ = _rigid_momenta(st)
+    assert np.abs(p1 - p0).max() < 1e-13 * st.mass[0] * 2.0
+    assert cc.collisions.tolist() == [1, 1]
+    assert 0.0 < cc.max_overlap.max() < 0.01  # ≈ 0.0033 d at 4 u*
+    # the sphere contact code (contacts.py), same stiffness, restitution, sub-step
+    model = make_contact_model(KN_SPHERE, e, f)
+    ps, vs, ws = pos.copy(), vel.copy(), np.zeros((2, 3))
+    cl = make_contact_list(ps, BOX, (True, False, True), 1.0, 0.3)
+    advance_granular(ps, vs, ws, np.zeros((2, 3)), np.zeros((2, 3)), model, cl, DT / n_sub, 10 * n_sub)
+    assert np.abs(vs - st.vel).max() < 1e-9
+    assert np.abs(ps - st.pos).max() < 1e-9
+
+
+def test_oblique_frictional_collision_of_rod_and_blade_conserves_momenta():
+    rod = shapes.build(1.9, 0.85, 0.75)
+    blade = shapes.build(1.8, 1.0, 0.55)
+    assert (rod.zingg_class, blade.zingg_class) == ("rod", "blade")
+    rng = np.random.default_rng(3)
+    quat = rng.normal(size=(2, 4))
+    quat /= np.linalg.norm(quat, axis=1)[:, None]
+    pos = np.array([[10.0, 5.0, 10.0], [12.2, 5.4, 10.3]])
+    vel = np.array([[3.0, 0.5, 0.2], [-2.0, -0.3, 0.1]])
+    st, w = _state([rod, blade], pos, vel, quat=quat)
+    cc = ccm.make_cluster_contacts(st, ccm.contact_parameters(KN, 0.65, 0.5, skin=0.3, box=BOX))
+    dt = 0.005  # the contact spans a step boundary (the spinning grains carry it over)
+    n_sub = ccm.substeps(st, KN, dt, 20)
+    p0, L0 = _rigid_momenta(st)
+    ke0 = _kinetic(st)
+    scale_p = np.abs(st.mass[:, None] * st.vel).sum()
+    scale_L = sum(st.mass[i] * np.linalg.norm(np.cross(st.pos[i], st.vel[i])) for i in range(2))
+    worst = [0.0, 0.0]
+
+    def record(s, c):
+        p, L = _rigid_momenta(s)
+        worst[0] = max(worst[0], np.abs(p - p0).max() / scale_p)
+        worst[1] = max(worst[1], np.abs(L - L0).max() / scale_L)
+
+    cc = _run(st, w, cc, n_sub, 120, dt=dt, record=record)
+    assert cc.collisions.tolist() == [1, 1]  # they met (once)
+    assert np.abs(st.omega).max() > 0.1  # the off-centre, frictional contact set them spinning
+    assert worst[0] < 1e-12
+    assert worst[1] < 1e-10
+    assert _kinetic(st) < ke0  # dissipative (e < 1, friction)
+    assert cc.max_overlap.max() < 0.02
+
+
+def _random_grains(n, box, seed):
+    rng = np.random.default_rng(seed)
+    classes, axes = shapes.draw_axes(n, Dn=1.0, seed=seed)
+    comps = [shapes.build(*a) for a in axes]
+    pos = np.column_stack([rng.uniform(0, box[0], n), rng.uniform(0.5, 4.0, n), rng.uniform(0, box[2], n)])
+    # some grains across the periodic boundaries (unwrapped coordinates, any image)
+    pos[: n // 4, 0] += box[0] * rng.integers(-2, 3, n // 4)
+    pos[n // 4: n // 2, 2] -= box[2] * rng.integers(-2, 3, n - n // 2 - n // 4)[: n // 2 - n // 4]
+    quat = rng.normal(size=(n, 4))
+    quat /= np.linalg.norm(quat, axis=1)[:, None]
+    return comps, pos, quat
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_no_pair_missed_across_cells_and_periodic_boundaries(seed):
+    box = (9.0, 5.0, 7.5)  # few cells: every grain is near a cell or periodic boundary
+    comps, pos, quat = _random_grains(60, box, seed)
+    st, w = _state(comps, pos, np.zeros((60, 3)), quat=quat)
+    skin = 0.2
+    cc = ccm.make_cluster_contacts(st, ccm.contact_parameters(KN, 0.65, 0.1, skin=skin, box=box))
+    # a step with no motion: x0 = x1, so the list cutoff is (d_a + d_b)/2 + skin exactly
+    w.x0[:, 0:3] = st.pos
+    w.x0[:, 3:6] = st.vel
+    w.x0[:, 6:10] = st.quat
+    w.x0[:, 10:13] = st.omega
+    cc = ccm.build_contact_list(st, w, cc, DT)
+    brute = ccm.brute_force_pairs(st, box, skin)
+    assert len(brute) > 20
+    assert ccm.listed_pairs(cc) == brute
+    # active grains: exactly those whose bounding spheres come within the skin of another
+    rho = cc.rho
+    act = np.zeros(60, bool)
+    for i in range(60):
+        for j in range(60):
+            if i != j:
+                d = st.pos[i] - st.pos[j]
+                d[0] -= box[0] * np.floor(d[0] / box[0] + 0.5)
+                d[2] -= box[2] * np.floor(d[2] / box[2] + 0.5)
+                act[i] |= np.linalg.norm(d) < rho[i] + rho[j] + skin
+    assert np.array_equal(cc.active.astype(bool), act)
+    # forces of the listed contacts = the brute-force springs k_n δ n (grains at rest)
+    ccm.component_forces(st, cc, DT, False)
+    cp = ccm.grain_pose_centres(st)
+    grain = np.repeat(np.arange(60), np.diff(st.cstart))
+    force = np.zeros((60, 3))
+    torque = np.zeros((60, 3))
+    for a, b in ccm.brute_force_pairs(st, box, 0.0):
+        d = cp[a] - cp[b]
+        d[0] -= box[0] * np.floor(d[0] / box[0] + 0.5)
+        d[2] -= box[2] * np.floor(d[2] / box[2] + 0.5)
+        r = np.linalg.norm(d)
+        n = d / r
+        dl = 0.5 * (st.d_comp[a] + st.d_comp[b]) - r
+        fa = KN * dl * n
+        xc = cp[a] - (0.5 * st.d_comp[a] - 0.5 * dl) * n  # contact point, a's image
+        i, j = grain[a], grain[b]
+        force[i] += fa
+        force[j] -= fa
+        torque[i] += np.cross(xc - st.pos[i], fa)
+        xj = cp[b] + (0.5 * st.d_comp[b] - 0.5 * dl) * n  # the same point, b's image
+        torque[j] -= np.cross(xj - st.pos[j], fa)
+    on = cc.active.astype(bool)
+    assert np.abs(force).max() > 0  # there were contacts
+    assert np.allclose(cc.force[on], force[on], rtol=1e-9, atol=1e-9 * np.abs(force).max())
+    assert np.allclose(cc.torque[on], torque[on], rtol=1e-9, atol=1e-9 * np.abs(torque).max())
+    assert np.all(force[~on] == 0)
