@@ -101,6 +101,7 @@ __all__ = ["ClusterContacts", "make_cluster_contacts", "contact_parameters", "su
            "advance_clusters_contacts", "component_forces", "brute_force_pairs", "listed_pairs",
            "point_effective_masses", "DEFAULT_SKIN"]
 
+PARALLEL_FROM = 128  # active grains from which the sub-step passes run in parallel (launch cost)
 PARTNERS = 16  # grains one grain can touch at once (statistics; more are not counted as new)
 DEFAULT_SKIN = 0.3  # Dn: engagement margin and list skin when the case gives none
 N_COUNTERS = 4  # list builds, overruns, grain-substeps, engaged grain-steps
@@ -765,6 +766,54 @@ def _grain_force(st, cc, p, h, update):
         cc.n_partners[p] = npart
 
 
+@njit(cache=True)
+def _kick_one(st, cc, p, k):
+    inv = k / st.mass[p]
+    for i in range(3):
+        cc.dv[p, i] += inv * cc.force[p, i]
+        cc.dL[p, i] += k * cc.torque[p, i]
+
+
+@njit(cache=True)
+def _move_one(st, w, cc, p, h, half_skin, sig, dt):
+    _kick_one(st, cc, p, 0.5 * h)
+    over = _drift_one(st, cc, p, h, half_skin)
+    _pose_one(st, w, cc, p, sig, dt)
+    return over
+
+
+@njit(cache=True, parallel=True)
+def _move_par(st, w, cc, h, half_skin, sig, dt):
+    over = np.zeros(cc.n_act[0], np.int64)
+    for q in prange(cc.n_act[0]):
+        over[q] = _move_one(st, w, cc, cc.act[q], h, half_skin, sig, dt)
+    return over.sum()
+
+
+@njit(cache=True)
+def _move_ser(st, w, cc, h, half_skin, sig, dt):
+    over = 0
+    for q in range(cc.n_act[0]):
+        over += _move_one(st, w, cc, cc.act[q], h, half_skin, sig, dt)
+    return over
+
+
+@njit(cache=True, parallel=True)
+def _force_kick_par(st, cc, h):
+    for q in prange(cc.n_act[0]):
+        p = cc.act[q]
+        _grain_force(st, cc, p, h, True)
+        _kick_one(st, cc, p, 0.5 * h)
+
+
+@njit(cache=True)
+def _force_kick_ser(st, cc, h):
+    for q in range(cc.n_act[0]):
+        p = cc.act[q]
+        _grain_force(st, cc, p, h, True)
+        _kick_one(st, cc, p, 0.5 * h)
+
+
 @njit(cache=True, parallel=True)
 def _kick(st, cc, k):
     dv, dL, force, torque, act, mass = cc.dv, cc.dL, cc.force, cc.torque, cc.act, st.mass
@@ -905,16 +954,18 @@ def contact_phase(st, w, cc, dt, n_sub):
     h = dt / n_sub
     half_skin = 0.5 * cc.par[4]
     component_forces(st, cc, h, False)
+    par = na >= PARALLEL_FROM
     for s in range(n_sub):
-        _kick(st, cc, 0.5 * h)
-        over = _drift(st, cc, h, half_skin)
         sig = (s + 1) / n_sub
-        _poses(st, w, cc, sig, dt)
+        # half kick, drift, pose at σ (one pass); contact forces and the second half kick
+        over = _move_par(st, w, cc, h, half_skin, sig, dt) if par else _move_ser(st, w, cc, h, half_skin, sig, dt)
         if over > 0:
             cc.counters[1] += over
             cc = _build_list(st, cc)
-        component_forces(st, cc, h, True)
-        _kick(st, cc, 0.5 * h)
+        if par:
+            _force_kick_par(st, cc, h)
+        else:
+            _force_kick_ser(st, cc, h)
     cc.counters[2] += na * n_sub
     _finish(st, w, cc)
     return cc

@@ -69,8 +69,9 @@ frictionless one (checked each time). If the contact point still descends afterw
 a second impact on the horizontal bed follows (as ``bed.bed_rebound``). Jump height
 is the highest elevation of the grain's lowest point above the bed top.
 
-Not here: grain–grain contacts between composites (cells.py/contacts.py act on
-spheres; the composite run refuses collisions.model other than "off").
+Grain–grain contacts between composites are not in this module: cluster_contacts.py
+acts on the component spheres of different grains after each free-flight step
+(``advance_clusters_contacts``; ``advance_clusters`` here is the run without them).
 """
 from __future__ import annotations
 

@@ -24,11 +24,22 @@ uniformly random (Shoemake 1992, stream [run.seed, 7]); a grain whose lowest poi
 start lower than the lowest sphere can (0.1 d above the bed top) is raised until it is
 there.
 
-Not here (clear errors instead): grain–grain contacts between composites
-(collisions.model must be "off" when there is more than one grain), the packed bed,
-checkpoints and --resume. ParaView output holds the centres of mass (diameter = Dn).
-The bed rebound is computed inside the free-flight kernel, so the timing has no
-separate bed share (``timing.bed_s`` = 0, said in ``timing.note``).
+Grain–grain contacts (collisions.model = "soft", the default): soft contacts between
+the component spheres of different grains, with the case's [collisions] stiffness,
+restitution, friction, k_t/k_n, steps_per_contact and skin (cluster_contacts.py: units,
+damping, sub-steps, the split with the free flight). The grains then start with their
+bounding spheres apart (``_centres_apart``; contacts off: initial.py's draw as before).
+summary.json's ``collisions`` block has the sphere runs' keys (particle_particle,
+per_particle, per_particle_per_unit_time, soft, overlap with max_over_d/mean_over_d in
+Dn, contact_phase), ``timing.particle_collisions_s`` the wall time of the contact phase;
+``timing.particle_collisions_share`` its share of the stepping time (compile excluded);
+particles.parquet the collisions and largest overlap of each grain.
+
+Not here (clear errors instead): binary hard-sphere contacts for composites
+(collisions.model = "hard"), the packed bed, checkpoints and --resume. ParaView output
+holds the centres of mass (diameter = Dn). The bed rebound is computed inside the
+free-flight kernel, so the timing has no separate bed share (``timing.bed_s`` = 0,
+said in ``timing.note``).
 """
 from __future__ import annotations
 
@@ -507,7 +518,7 @@ class ClusterSimulation:
                     "note": "bed rebounds are computed inside the free-flight kernel (clusters.step_grain)"}
         ff, pc = (float(x) for x in self.timers)
         return {"wall_s": wall, "compile_s": compile_s, "kernel_s": kernel_s, "free_flight_s": ff, "bed_s": 0.0,
-                "particle_collisions_s": pc, "particle_collisions_share": pc / wall if wall > 0 else None,
+                "particle_collisions_s": pc, "particle_collisions_share": pc / kernel_s if kernel_s > 0 else None,
                 "threads": threads,
                 "note": "bed rebounds are computed inside the free-flight kernel (clusters.step_grain); "
                         "particle_collisions_s: the whole contact phase (engagement, lists, sub-steps)"}
