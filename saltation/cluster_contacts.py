@@ -72,6 +72,15 @@ Scheme inside the hydrodynamic step (operator split after the free flight, as co
    a contact is an impulsive velocity change). The others keep the RK4 result bit for
    bit.
 
+Accuracy: within a contact the scheme is velocity Verlet (second order in h); the split
+with the free flight adds a first-order error in Δt where the free path turns the
+grain — its orientation is the slerp between the RK4 end orientations while its
+angular velocity is taken linear in time. Measured on an elastic (e = 1), frictionless
+off-centre collision of a spinning rod and blade: kinetic energy after/before − 1 =
+1e-4 to 1e-3 at Δt = 0.0025–0.01 d/u*, either sign, and not reduced by more sub-steps
+(it is 0 to round-off for grains that do not spin; angular and linear momentum are
+conserved to round-off whatever the spin).
+
 Known gaps: the bed is not part of the sub-steps (the free flight has already applied
 the rebound; a grain pushed below the bed top by a contact is lifted back by the next
 free-flight step); a grain deflected by more than the engagement margin s towards a
@@ -768,10 +777,18 @@ def _grain_force(st, cc, p, h, update):
 
 @njit(cache=True)
 def _kick_one(st, cc, p, k):
+    """δv += k F/m, δL += k T, and δΩ += k I_w⁻¹ T (Ω = I_w⁻¹(L_f + δL) is linear in δL:
+    the drift that follows must turn the grain with the kicked spin, as it moves it
+    with the kicked velocity)."""
     inv = k / st.mass[p]
+    iw = cc.iw[p]
+    t0, t1, t2 = k * cc.torque[p, 0], k * cc.torque[p, 1], k * cc.torque[p, 2]
     for i in range(3):
         cc.dv[p, i] += inv * cc.force[p, i]
-        cc.dL[p, i] += k * cc.torque[p, i]
+        cc.dOm[p, i] += iw[i, 0] * t0 + iw[i, 1] * t1 + iw[i, 2] * t2
+    cc.dL[p, 0] += t0
+    cc.dL[p, 1] += t1
+    cc.dL[p, 2] += t2
 
 
 @njit(cache=True)
