@@ -190,22 +190,102 @@ def _component_with_gradient(d, n0, n1, wt, i0, i1, wx, j0, j1, wy, k0, k1, wz, 
     return val, ex0 + wz * (ex1 - ex0), ey0 + wz * (ey1 - ey0), b1 - b0, h0 + wz * (h1 - h0)
 
 
+@njit(cache=True, inline="always")
+def _node3(d, n0, n1, wt, i, j, k):
+    """The three stored components at node (i, j, k), linear in time (weight wt on n1),
+    and their changes from n0 to n1: one row of 3 values per snapshot (contiguous)."""
+    a0 = np.float64(d[n0, i, j, k, 0])
+    a1 = np.float64(d[n0, i, j, k, 1])
+    a2 = np.float64(d[n0, i, j, k, 2])
+    e0 = np.float64(d[n1, i, j, k, 0]) - a0
+    e1 = np.float64(d[n1, i, j, k, 1]) - a1
+    e2 = np.float64(d[n1, i, j, k, 2]) - a2
+    return a0 + wt * e0, a1 + wt * e1, a2 + wt * e2, e0, e1, e2
+
+
+@njit(cache=True, inline="always")
+def _trilinear(v000, v100, v010, v110, v001, v101, v011, v111, wx, wy, wz):
+    """Trilinear value of one component from its 8 node values (as _component)."""
+    a00 = v000 + wx * (v100 - v000)
+    a10 = v010 + wx * (v110 - v010)
+    a01 = v001 + wx * (v101 - v001)
+    a11 = v011 + wx * (v111 - v011)
+    b0 = a00 + wy * (a10 - a00)
+    b1 = a01 + wy * (a11 - a01)
+    return b0 + wz * (b1 - b0)
+
+
+@njit(cache=True, inline="always")
+def _trilinear_with_gradient(v000, v100, v010, v110, v001, v101, v011, v111,
+                             e000, e100, e010, e110, e001, e101, e011, e111, wx, wy, wz):
+    """Value, derivatives along the index axes and change over the snapshot interval of
+    one component from its 8 node values (the arithmetic of _component_with_gradient)."""
+    a00 = v000 + wx * (v100 - v000)
+    a10 = v010 + wx * (v110 - v010)
+    a01 = v001 + wx * (v101 - v001)
+    a11 = v011 + wx * (v111 - v011)
+    b0 = a00 + wy * (a10 - a00)
+    b1 = a01 + wy * (a11 - a01)
+    val = b0 + wz * (b1 - b0)
+    dx00 = v100 - v000
+    dx10 = v110 - v010
+    dx01 = v101 - v001
+    dx11 = v111 - v011
+    ex0 = dx00 + wy * (dx10 - dx00)
+    ex1 = dx01 + wy * (dx11 - dx01)
+    ey0 = a10 - a00
+    ey1 = a11 - a01
+    f00 = e000 + wx * (e100 - e000)
+    f10 = e010 + wx * (e110 - e010)
+    f01 = e001 + wx * (e101 - e001)
+    f11 = e011 + wx * (e111 - e011)
+    h0 = f00 + wy * (f10 - f00)
+    h1 = f01 + wy * (f11 - f01)
+    return val, ex0 + wz * (ex1 - ex0), ey0 + wz * (ey1 - ey0), b1 - b0, h0 + wz * (h1 - h0)
+
+
 @njit(cache=True, inline="always", error_model="numpy")
 def _gradient_at(f, n0, n1, wt, i0, i1, wx, j0, j1, wy, dyc, k0, k1, wz, u, g, dudt):
-    """u, g, ∂u/∂t (u⁺ units) at a located point inside the stored y range."""
+    """u, g, ∂u/∂t (u⁺ units) at a located point inside the stored y range. The 8 nodes
+    are read once each, all 3 components together (they are adjacent in memory)."""
     d = f.data
     inv_dx = 1.0 / f.dx
     inv_dz = 1.0 / f.dz
     inv_dy = 1.0 / dyc if dyc > 0.0 else 0.0  # a single plane: no y-derivative
     inv_dt = 1.0 / f.dt if f.nt > 1 else 0.0
-    for c in range(3):
-        val, ex, ey, ez, et = _component_with_gradient(d, n0, n1, wt, i0, i1, wx, j0, j1, wy, k0, k1, wz, c)
-        sc = f.scale[c]
-        u[c] = val * sc + f.offset[c]
-        g[c, 0] = ex * sc * inv_dx
-        g[c, 1] = ey * sc * inv_dy
-        g[c, 2] = ez * sc * inv_dz
-        dudt[c] = et * sc * inv_dt
+    p000 = _node3(d, n0, n1, wt, i0, j0, k0)
+    p100 = _node3(d, n0, n1, wt, i1, j0, k0)
+    p010 = _node3(d, n0, n1, wt, i0, j1, k0)
+    p110 = _node3(d, n0, n1, wt, i1, j1, k0)
+    p001 = _node3(d, n0, n1, wt, i0, j0, k1)
+    p101 = _node3(d, n0, n1, wt, i1, j0, k1)
+    p011 = _node3(d, n0, n1, wt, i0, j1, k1)
+    p111 = _node3(d, n0, n1, wt, i1, j1, k1)
+    _store_component(f, 0, p000[0], p100[0], p010[0], p110[0], p001[0], p101[0], p011[0], p111[0],
+                     p000[3], p100[3], p010[3], p110[3], p001[3], p101[3], p011[3], p111[3],
+                     wx, wy, wz, inv_dx, inv_dy, inv_dz, inv_dt, u, g, dudt)
+    _store_component(f, 1, p000[1], p100[1], p010[1], p110[1], p001[1], p101[1], p011[1], p111[1],
+                     p000[4], p100[4], p010[4], p110[4], p001[4], p101[4], p011[4], p111[4],
+                     wx, wy, wz, inv_dx, inv_dy, inv_dz, inv_dt, u, g, dudt)
+    _store_component(f, 2, p000[2], p100[2], p010[2], p110[2], p001[2], p101[2], p011[2], p111[2],
+                     p000[5], p100[5], p010[5], p110[5], p001[5], p101[5], p011[5], p111[5],
+                     wx, wy, wz, inv_dx, inv_dy, inv_dz, inv_dt, u, g, dudt)
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _store_component(f, c, v000, v100, v010, v110, v001, v101, v011, v111,
+                     e000, e100, e010, e110, e001, e101, e011, e111,
+                     wx, wy, wz, inv_dx, inv_dy, inv_dz, inv_dt, u, g, dudt):
+    # component c of u, g and ∂u/∂t from its 8 node values, scaled to u⁺ units
+    val, ex, ey, ez, et = _trilinear_with_gradient(
+        v000, v100, v010, v110, v001, v101, v011, v111,
+        e000, e100, e010, e110, e001, e101, e011, e111, wx, wy, wz)
+    sc = f.scale[c]
+    u[c] = val * sc + f.offset[c]
+    g[c, 0] = ex * sc * inv_dx
+    g[c, 1] = ey * sc * inv_dy
+    g[c, 2] = ez * sc * inv_dz
+    dudt[c] = et * sc * inv_dt
 
 
 @njit(cache=True, inline="always", error_model="numpy")
@@ -238,8 +318,21 @@ def _velocity_at_height(f, n0, n1, wt, i0, i1, wx, k0, k1, wz, yp, u):
         u[2] = 0.0
         return status
     d = f.data
-    for c in range(3):
-        u[c] = _component(d, n0, n1, wt, i0, i1, wx, j0, j1, wy, k0, k1, wz, c) * f.scale[c] + f.offset[c]
+    # the 8 nodes read once each, 3 components together (as in _gradient_at)
+    p000 = _node3(d, n0, n1, wt, i0, j0, k0)
+    p100 = _node3(d, n0, n1, wt, i1, j0, k0)
+    p010 = _node3(d, n0, n1, wt, i0, j1, k0)
+    p110 = _node3(d, n0, n1, wt, i1, j1, k0)
+    p001 = _node3(d, n0, n1, wt, i0, j0, k1)
+    p101 = _node3(d, n0, n1, wt, i1, j0, k1)
+    p011 = _node3(d, n0, n1, wt, i0, j1, k1)
+    p111 = _node3(d, n0, n1, wt, i1, j1, k1)
+    u[0] = _trilinear(p000[0], p100[0], p010[0], p110[0], p001[0], p101[0], p011[0], p111[0],
+                      wx, wy, wz) * f.scale[0] + f.offset[0]
+    u[1] = _trilinear(p000[1], p100[1], p010[1], p110[1], p001[1], p101[1], p011[1], p111[1],
+                      wx, wy, wz) * f.scale[1] + f.offset[1]
+    u[2] = _trilinear(p000[2], p100[2], p010[2], p110[2], p001[2], p101[2], p011[2], p111[2],
+                      wx, wy, wz) * f.scale[2] + f.offset[2]
     if sublayer:
         y1 = f.y[0]
         r = yp / y1
