@@ -28,6 +28,8 @@ How the kernels are made fast (they run four times per grain and time step):
 * the two bracketing snapshots are blended per grid node on the raw (possibly int16)
   values, then one trilinear pass gives the value, its gradient and its change over
   the snapshot interval; scale and offset (quantization) are applied once at the end;
+* each of the 8 nodes is read once with its 3 components (adjacent in memory), not
+  once per component (``_node3``; ~4 % less time per sample, same arithmetic);
 * ``sample_column`` samples a grain's centre (with gradient) and its top and bottom
   (velocity only) on one vertical: x, z and time are located once;
 * the y search is a binary search of fixed trip count with a conditional move;
@@ -123,74 +125,6 @@ def _wall_normal(f, yp):
 
 
 @njit(cache=True, inline="always")
-def _node(d, n0, n1, wt, i, j, k, c):
-    """Stored (raw, possibly quantized) component c at grid node (i, j, k), linear in time
-    between snapshots n0 and n1 (weight wt on n1), and its change from n0 to n1."""
-    a = np.float64(d[n0, i, j, k, c])
-    b = np.float64(d[n1, i, j, k, c])
-    return a + wt * (b - a), b - a
-
-
-@njit(cache=True, inline="always")
-def _component(d, n0, n1, wt, i0, i1, wx, j0, j1, wy, k0, k1, wz, c):
-    """Raw trilinear value of component c (time-interpolated)."""
-    v000, _ = _node(d, n0, n1, wt, i0, j0, k0, c)
-    v100, _ = _node(d, n0, n1, wt, i1, j0, k0, c)
-    v010, _ = _node(d, n0, n1, wt, i0, j1, k0, c)
-    v110, _ = _node(d, n0, n1, wt, i1, j1, k0, c)
-    v001, _ = _node(d, n0, n1, wt, i0, j0, k1, c)
-    v101, _ = _node(d, n0, n1, wt, i1, j0, k1, c)
-    v011, _ = _node(d, n0, n1, wt, i0, j1, k1, c)
-    v111, _ = _node(d, n0, n1, wt, i1, j1, k1, c)
-    a00 = v000 + wx * (v100 - v000)
-    a10 = v010 + wx * (v110 - v010)
-    a01 = v001 + wx * (v101 - v001)
-    a11 = v011 + wx * (v111 - v011)
-    b0 = a00 + wy * (a10 - a00)
-    b1 = a01 + wy * (a11 - a01)
-    return b0 + wz * (b1 - b0)
-
-
-@njit(cache=True, inline="always")
-def _component_with_gradient(d, n0, n1, wt, i0, i1, wx, j0, j1, wy, k0, k1, wz, c):
-    """Raw trilinear value of component c, its derivatives along the three index axes
-    (per cell: multiply by 1/dx, 1/dyc, 1/dz) and its change over the snapshot interval."""
-    v000, e000 = _node(d, n0, n1, wt, i0, j0, k0, c)
-    v100, e100 = _node(d, n0, n1, wt, i1, j0, k0, c)
-    v010, e010 = _node(d, n0, n1, wt, i0, j1, k0, c)
-    v110, e110 = _node(d, n0, n1, wt, i1, j1, k0, c)
-    v001, e001 = _node(d, n0, n1, wt, i0, j0, k1, c)
-    v101, e101 = _node(d, n0, n1, wt, i1, j0, k1, c)
-    v011, e011 = _node(d, n0, n1, wt, i0, j1, k1, c)
-    v111, e111 = _node(d, n0, n1, wt, i1, j1, k1, c)
-    # value: interpolate in x, then y, then z
-    a00 = v000 + wx * (v100 - v000)
-    a10 = v010 + wx * (v110 - v010)
-    a01 = v001 + wx * (v101 - v001)
-    a11 = v011 + wx * (v111 - v011)
-    b0 = a00 + wy * (a10 - a00)
-    b1 = a01 + wy * (a11 - a01)
-    val = b0 + wz * (b1 - b0)
-    # exact derivatives of the trilinear interpolant
-    dx00 = v100 - v000
-    dx10 = v110 - v010
-    dx01 = v101 - v001
-    dx11 = v111 - v011
-    ex0 = dx00 + wy * (dx10 - dx00)
-    ex1 = dx01 + wy * (dx11 - dx01)
-    ey0 = a10 - a00
-    ey1 = a11 - a01
-    # change over the snapshot interval (the time interpolant's slope times dt)
-    f00 = e000 + wx * (e100 - e000)
-    f10 = e010 + wx * (e110 - e010)
-    f01 = e001 + wx * (e101 - e001)
-    f11 = e011 + wx * (e111 - e011)
-    h0 = f00 + wy * (f10 - f00)
-    h1 = f01 + wy * (f11 - f01)
-    return val, ex0 + wz * (ex1 - ex0), ey0 + wz * (ey1 - ey0), b1 - b0, h0 + wz * (h1 - h0)
-
-
-@njit(cache=True, inline="always")
 def _node3(d, n0, n1, wt, i, j, k):
     """The three stored components at node (i, j, k), linear in time (weight wt on n1),
     and their changes from n0 to n1: one row of 3 values per snapshot (contiguous)."""
@@ -205,7 +139,7 @@ def _node3(d, n0, n1, wt, i, j, k):
 
 @njit(cache=True, inline="always")
 def _trilinear(v000, v100, v010, v110, v001, v101, v011, v111, wx, wy, wz):
-    """Trilinear value of one component from its 8 node values (as _component)."""
+    """Trilinear value of one component from its 8 node values."""
     a00 = v000 + wx * (v100 - v000)
     a10 = v010 + wx * (v110 - v010)
     a01 = v001 + wx * (v101 - v001)
@@ -219,7 +153,8 @@ def _trilinear(v000, v100, v010, v110, v001, v101, v011, v111, wx, wy, wz):
 def _trilinear_with_gradient(v000, v100, v010, v110, v001, v101, v011, v111,
                              e000, e100, e010, e110, e001, e101, e011, e111, wx, wy, wz):
     """Value, derivatives along the index axes and change over the snapshot interval of
-    one component from its 8 node values (the arithmetic of _component_with_gradient)."""
+    one component from its 8 node values (exact derivatives of the trilinear interpolant;
+    per cell: multiply by 1/dx, 1/dyc, 1/dz)."""
     a00 = v000 + wx * (v100 - v000)
     a10 = v010 + wx * (v110 - v010)
     a01 = v001 + wx * (v101 - v001)
