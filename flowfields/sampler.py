@@ -322,12 +322,16 @@ def sample_point(f, xp, yp, zp, tp, u, g, dudt, with_gradient=True):
 
 
 @njit(cache=True, error_model="numpy", _nrt=False, fastmath={"contract"})
-def sample_column(f, xp, yp, zp, tp, y_top, y_bottom, u, g, dudt, u_top, u_bottom):
-    """``sample_point`` with gradient at (xp, yp, zp) plus the velocity alone at the heights
-    y_top and y_bottom of the same vertical (x, z and time located once).
+def sample_column(f, xp, yp, zp, tp, y_top, y_bottom, u, g, dudt, u_top, u_bottom, with_gradient=True):
+    """``sample_point`` at (xp, yp, zp) (with gradient unless with_gradient=False: then g
+    and dudt are left as they are) plus the velocity alone at the heights y_top and
+    y_bottom of the same vertical (x, z and time located once).
     Velocities at points below the wall are zero. Returns the status of the centre."""
     i0, i1, wx, k0, k1, wz, n0, n1, wt = _locate_xzt(f, xp, zp, tp)
-    status = _gradient_at_height(f, n0, n1, wt, i0, i1, wx, k0, k1, wz, yp, u, g, dudt)
+    if with_gradient:
+        status = _gradient_at_height(f, n0, n1, wt, i0, i1, wx, k0, k1, wz, yp, u, g, dudt)
+    else:
+        status = _velocity_at_height(f, n0, n1, wt, i0, i1, wx, k0, k1, wz, yp, u)
     _velocity_at_height(f, n0, n1, wt, i0, i1, wx, k0, k1, wz, y_top, u_top)
     _velocity_at_height(f, n0, n1, wt, i0, i1, wx, k0, k1, wz, y_bottom, u_bottom)
     return status

@@ -387,6 +387,10 @@ class ForcesConfig(_Table):
                                     doc="fluid acceleration / pressure gradient")
     basset: bool = _key(True, kind="bool", doc="Basset history force")
     weight: bool = _key(True, kind="bool", doc="submerged weight")
+    spin: bool = _key(True, kind="bool",
+                      doc="spin law in free flight: rotational drag relaxing the grain's spin "
+                          "toward half the fluid vorticity (SPEC §2, spin.py); false: spin "
+                          "changes only at contacts")
     added_mass_coefficient: float = _key(0.5, kind="float", ge=0.0, doc="Cm")
     lift_coefficient: float = _key(0.2, kind="float", ge=0.0, doc="C_L")
     magnus_coefficient: float = _key(1.0, kind="float", ge=0.0, doc="C_Ω")

@@ -13,10 +13,12 @@ from flowfields.sampler import ABOVE_TOP, sample_column, sample_point, vorticity
 
 
 @njit(cache=True, error_model="numpy", _nrt=False)
-def fluid_at_grain(f, re_star, x, y, z, t, with_lift, uf, grad, dudt, vort, uf_top, uf_bot):
+def fluid_at_grain(f, re_star, x, y, z, t, with_lift, uf, grad, dudt, vort, uf_top, uf_bot, with_gradient=True):
     """Fluid velocity, gradient, ∂u/∂t and vorticity at the grain centre, and (with_lift)
     the fluid velocity at its top and bottom (y ± 1/2, zero below the bed; SPEC §2 lift).
-    Without lift uf_top and uf_bot are not written (the lift term does not read them).
+    Without lift uf_top and uf_bot are not written (the lift term does not read them);
+    without gradient (no Magnus, added mass, fluid acceleration or spin law: drag, weight
+    and lift need the velocity alone) grad, dudt and vort are not written either.
 
     The three heights share one vertical of the flow: x, z and time are located once
     (``sampler.sample_column``). Returns 1 if the centre lies above the stored flow (the
@@ -27,14 +29,15 @@ def fluid_at_grain(f, re_star, x, y, z, t, with_lift, uf, grad, dudt, vort, uf_t
     tp = t * re_star
     if with_lift:
         status = sample_column(f, xp, yp, zp, tp, (y + 0.5) * re_star, (y - 0.5) * re_star,
-                               uf, grad, dudt, uf_top, uf_bot)
+                               uf, grad, dudt, uf_top, uf_bot, with_gradient)
     else:
-        status = sample_point(f, xp, yp, zp, tp, uf, grad, dudt)
-    for i in range(3):
-        dudt[i] *= re_star
-        for j in range(3):
-            grad[i, j] *= re_star
-    vorticity_from_gradient(grad, vort)
+        status = sample_point(f, xp, yp, zp, tp, uf, grad, dudt, with_gradient)
+    if with_gradient:
+        for i in range(3):
+            dudt[i] *= re_star
+            for j in range(3):
+                grad[i, j] *= re_star
+        vorticity_from_gradient(grad, vort)
     return 1 if status == ABOVE_TOP else 0
 
 

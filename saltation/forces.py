@@ -56,7 +56,8 @@ ON_MAGNUS = 14
 ON_ADDED_MASS = 15
 ON_FLUID_ACC = 16
 ON_BASSET = 17       # not used here; carried for the integrator's convenience
-N_COEF = 18
+ON_SPIN = 18         # free-flight spin law (spin.py); not used here
+N_COEF = 19
 
 # ---------------------------------------------------------------- term rows
 TERM_WEIGHT = 0
@@ -75,7 +76,7 @@ RE_P_MIN = 1.0e-12
 def make_coefficients(*, tau_star, R=1.65, Rp=None, re_star=None, slope=0.0,
                       Cm=0.5, C_L=0.2, C_Omega=1.0,
                       weight=True, drag=True, lift=True, magnus=True,
-                      added_mass=True, fluid_acceleration=True, basset=True):
+                      added_mass=True, fluid_acceleration=True, basset=True, spin=True):
     """Build the ``coef`` array for the force kernels.
 
     Parameters
@@ -86,7 +87,8 @@ def make_coefficients(*, tau_star, R=1.65, Rp=None, re_star=None, slope=0.0,
         shear Reynolds number Re* = √τ*·Rp.  Both may be given if consistent.
     slope : bed slope θ in radians.
     Cm, C_L, C_Omega : added-mass, lift and Magnus coefficients.
-    weight … basset : on/off switches of the terms.
+    weight … basset : on/off switches of the terms; spin: the free-flight spin law
+        (spin.py) — off, the spin changes only at contacts.
     """
     if tau_star is None or not tau_star > 0:
         raise ValueError(f"tau_star must be > 0, got {tau_star!r}")
@@ -124,6 +126,7 @@ def make_coefficients(*, tau_star, R=1.65, Rp=None, re_star=None, slope=0.0,
     coef[ON_ADDED_MASS] = float(bool(added_mass))
     coef[ON_FLUID_ACC] = float(bool(fluid_acceleration))
     coef[ON_BASSET] = float(bool(basset))
+    coef[ON_SPIN] = float(bool(spin))
     return coef
 
 

@@ -29,7 +29,8 @@ from numba import njit, prange
 from . import history
 from .bed import bed_rebound, virtual_bed_normal
 from .flow import fluid_at_grain
-from .forces import BASSET_PREFACTOR, ON_BASSET, ON_LIFT, R_SUBMERGED, RE_STAR, fluid_acceleration
+from .forces import (BASSET_PREFACTOR, ON_ADDED_MASS, ON_BASSET, ON_FLUID_ACC, ON_LIFT, ON_MAGNUS, ON_SPIN,
+                     R_SUBMERGED, RE_STAR, fluid_acceleration)
 from .history import META_COUNT, add_basset_acceleration, history_end_step, history_reset
 from .rng import uniform2
 from .spin import spin_rate
@@ -138,7 +139,11 @@ def _rhs(coef, x, basset, uf, grad, dudt, vort, uf_top, uf_bot, acc, dspin, k):
     up = x[3:6]
     spin = x[6:9]
     fluid_acceleration(up, uf, grad, dudt, vort, spin, uf_top, uf_bot, coef, acc)
-    spin_rate(spin, vort, coef[R_SUBMERGED], coef[RE_STAR], dspin)
+    if coef[ON_SPIN] != 0.0:
+        spin_rate(spin, vort, coef[R_SUBMERGED], coef[RE_STAR], dspin)
+    else:
+        for i in range(3):
+            dspin[i] = 0.0
     for i in range(3):
         k[i] = x[3 + i]
         k[3 + i] = acc[i] + basset[i]
@@ -154,6 +159,11 @@ def _free_flight_body(f, coef, st, w, hc, p, t, dt):
     re_star = coef[RE_STAR]
     with_lift = coef[ON_LIFT] != 0.0
     with_basset = coef[ON_BASSET] != 0.0
+    # the velocity gradient serves Magnus (vorticity), added mass and fluid acceleration
+    # (material derivatives) and the spin law (vorticity); drag, weight and lift need the
+    # velocity alone, a cheaper sample
+    with_gradient = (coef[ON_MAGNUS] != 0.0 or coef[ON_ADDED_MASS] != 0.0 or coef[ON_FLUID_ACC] != 0.0
+                     or coef[ON_SPIN] != 0.0)
     pos = st.pos[p]
     vel = st.vel[p]
     spin = st.spin[p]
@@ -174,7 +184,8 @@ def _free_flight_body(f, coef, st, w, hc, p, t, dt):
         x0[3 + i] = vel[i]
         x0[6 + i] = spin[i]
     if st.fresh[p] == 0:
-        fluid_at_grain(f, re_star, x0[0], x0[1], x0[2], t, with_lift, uf, grad, dudt, vort, uf_top, uf_bot)
+        fluid_at_grain(f, re_star, x0[0], x0[1], x0[2], t, with_lift, uf, grad, dudt, vort, uf_top, uf_bot,
+                      with_gradient)
     i_hist = st.hist_i[p]
     for i in range(3):
         basset[i] = 0.0
@@ -192,7 +203,8 @@ def _free_flight_body(f, coef, st, w, hc, p, t, dt):
         h = 0.5 * dt if stage < 3 else dt
         for i in range(9):
             x[i] = x0[i] + h * k[stage - 1, i]
-        fluid_at_grain(f, re_star, x[0], x[1], x[2], t + h, with_lift, uf, grad, dudt, vort, uf_top, uf_bot)
+        fluid_at_grain(f, re_star, x[0], x[1], x[2], t + h, with_lift, uf, grad, dudt, vort, uf_top, uf_bot,
+                      with_gradient)
         _rhs(coef, x, basset, uf, grad, dudt, vort, uf_top, uf_bot, acc, dspin, k[stage])
     for i in range(3):
         pos[i] += dt / 6.0 * (k[0, i] + 2.0 * k[1, i] + 2.0 * k[2, i] + k[3, i])
@@ -203,7 +215,8 @@ def _free_flight_body(f, coef, st, w, hc, p, t, dt):
             st.status[p] = NOT_FINITE
             return
     # fluid at the new position: closes the history step and serves as the next stage 1
-    fluid_at_grain(f, re_star, pos[0], pos[1], pos[2], t + dt, with_lift, uf, grad, dudt, vort, uf_top, uf_bot)
+    fluid_at_grain(f, re_star, pos[0], pos[1], pos[2], t + dt, with_lift, uf, grad, dudt, vort, uf_top, uf_bot,
+                      with_gradient)
     st.fresh[p] = 1
     if with_basset:
         history_end_step(

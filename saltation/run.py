@@ -159,6 +159,7 @@ class Simulation:
             added_mass=f.added_mass,
             fluid_acceleration=f.fluid_acceleration,
             basset=f.basset,
+            spin=f.spin,
         )
         self.bed = np.array([case.bed_restitution, case.bed_friction, case.bed.max_tilt_radians])
         self.n_window = f.basset_window

@@ -143,7 +143,8 @@ class ClusterSimulation:
             tau_star=case.shields_number, R=case.submerged_specific_gravity, re_star=self.re_star,
             slope=case.flow.slope_radians, Cm=f.added_mass_coefficient, C_L=f.lift_coefficient,
             C_Omega=f.magnus_coefficient, weight=f.weight, drag=f.drag, lift=f.lift, magnus=f.magnus,
-            added_mass=f.added_mass, fluid_acceleration=f.fluid_acceleration, basset=f.basset)
+            added_mass=f.added_mass, fluid_acceleration=f.fluid_acceleration, basset=f.basset,
+            spin=f.spin)
         self.bed = np.array([case.bed_restitution, case.bed_friction, case.bed.max_tilt_radians])
         self.n_window = f.basset_window
         self.hist_coef = history.make_history_coefficients(self.dt, self.n_window)
@@ -170,7 +171,8 @@ class ClusterSimulation:
         quat = random_quaternions(self.n, np.random.default_rng([int(c.run.seed), 7]))
         st = clusters.make_cluster_state(self.composites, pos, vel, quat, spin, 0.0, self.n_window,
                                          R=c.submerged_specific_gravity, Cm=self.coef[CM],
-                                         re_star=self.re_star, jump_capacity=JUMP_CAPACITY)
+                                         re_star=self.re_star, jump_capacity=JUMP_CAPACITY,
+                                         spin_drag=c.forces.spin)
         low = clusters.lowest_points(st)
         lift = np.maximum(MIN_START_BOTTOM - low, 0.0)
         if np.any(lift > 0):

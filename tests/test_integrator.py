@@ -130,3 +130,41 @@ def test_nan_stops_the_run_naming_particle_step_and_state(tmp_path, monkeypatch)
     # what was written so far is kept
     assert (tmp_path / "nan" / "tracks.parquet").exists()
     assert json.loads((tmp_path / "nan" / "summary.json").read_text())["status"] == "failed"
+
+
+def _shear_flow(rate=0.02):
+    y = np.array([1e-3, 1e3])
+    data = np.zeros((1, 2, 2, 2, 3), dtype=np.float32)
+    data[0, :, :, :, 0] = (rate * y)[None, :, None]
+    return in_memory_dataset([0.0, 1e5], y, [0.0, 1e5], data, re_tau=1e3, times_plus=[0.0])
+
+
+def test_spin_law_off_keeps_the_spin_and_the_velocity_only_sample_moves_the_grain_alike():
+    """[forces] spin = false: no rotational drag, so in free flight the spin stays what it
+    was; with Magnus, added mass and fluid acceleration also off the kernel samples the
+    velocity without its gradient — the translation must be that of the gradient path."""
+    flow = _shear_flow()
+    kw = dict(tau_star=0.057, R=1.65, re_star=17.5, magnus=False, added_mass=False, fluid_acceleration=False)
+    spin0 = [0.0, 0.0, -2.0]
+    on = integrate(flow, make_coefficients(**kw), [0, 50.0, 0], [1.0, 0.5, 0], spin0, dt=0.02, n_steps=300)
+    off = integrate(flow, make_coefficients(**kw, spin=False), [0, 50.0, 0], [1.0, 0.5, 0], spin0, dt=0.02,
+                    n_steps=300)
+    assert on.impacts[0] == 0 and off.impacts[0] == 0
+    np.testing.assert_array_equal(off.spin[0], spin0)
+    # the spin law relaxes ϖ toward ½ ω_f = -0.175 u*/d (shear 0.35 u*/d): it did move
+    assert abs(on.spin[0, 2] - spin0[2]) > 0.1
+    np.testing.assert_allclose(off.pos[0], on.pos[0], rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(off.vel[0], on.vel[0], rtol=1e-12, atol=1e-12)
+
+
+def test_spin_key_reaches_the_kernel(tmp_path):
+    from saltation.config import resolve_domain
+    from saltation.forces import ON_SPIN
+    from saltation.run import _les_box_m, open_flow
+
+    assert load_case("cases/default.toml").forces.spin is True
+    for value in (True, False):
+        case = load_case("cases/default.toml", {"forces.spin": value, "flow.source": "loglaw"})
+        ds = open_flow(case)
+        sim = Simulation(resolve_domain(case, _les_box_m(ds, case)), ds, tmp_path / str(value), progress=False)
+        assert sim.coef[ON_SPIN] == float(value)
