@@ -216,7 +216,7 @@ class Simulation:
 
     # ------------------------------------------------------------------ main loop
     def run(self) -> RunResult:
-        from tqdm import tqdm
+        from .progress import progress_bar
 
         c = self.case
         self.out.mkdir(parents=True, exist_ok=True)
@@ -257,7 +257,7 @@ class Simulation:
         kernel_s = meta.get("kernel_s", 0.0)
         status = "completed"
         step = meta.get("step", 0)
-        bar = tqdm(total=self.n_steps, initial=step, desc=c.run.name or "run", unit="step", disable=not self.progress, delay=2.0)
+        bar = progress_bar(self.n_steps, initial=step, desc=c.run.name or "run", enabled=self.progress)
         particle_idx = np.arange(self.n)
 
         def output(step_now):

@@ -252,7 +252,7 @@ class ClusterSimulation:
 
     # ------------------------------------------------------------------ main loop
     def run(self):
-        from tqdm import tqdm
+        from .progress import progress_bar
 
         from .analysis.variance import AnalysisError, RunVariance
         from .run import RunResult, SimulationError, VARIANCE_FILE
@@ -290,7 +290,7 @@ class ClusterSimulation:
         step = 0
         rows: list = []
         idx = np.arange(self.n)
-        bar = tqdm(total=self.n_steps, desc=c.run.name or "run", unit="step", disable=not self.progress, delay=2.0)
+        bar = progress_bar(self.n_steps, desc=c.run.name or "run", enabled=self.progress)
 
         def output(s):
             t = s * self.dt
