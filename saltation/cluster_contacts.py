@@ -263,6 +263,18 @@ def _layer(k, n, periodic, s):
 
 
 @njit(cache=True, inline="always")
+def _stencil_cell(ix, iy, iz, n, s):
+    """Cell of entry s (0..26) of the 3×3×3 stencil around cell (ix, iy, iz), x outermost
+    and z innermost; −1 where that neighbour does not exist (``_layer``)."""
+    cx = _layer(ix, n[0], True, s // 9)
+    cy = _layer(iy, n[1], False, (s // 3) % 3)
+    cz = _layer(iz, n[2], True, s % 3)
+    if cx < 0 or cy < 0 or cz < 0:
+        return -1
+    return (cx * n[1] + cy) * n[2] + cz
+
+
+@njit(cache=True, inline="always")
 def _qmul(a0, a1, a2, a3, b0, b1, b2, b3):
     return (a0 * b0 - a1 * b1 - a2 * b2 - a3 * b3, a0 * b1 + a1 * b0 + a2 * b3 - a3 * b2,
             a0 * b2 - a1 * b3 + a2 * b0 + a3 * b1, a0 * b3 + a1 * b2 - a2 * b1 + a3 * b0)
@@ -353,33 +365,20 @@ def _engage_pass(pos, ok, rho, reach, skin, box, n, size, start, count, order, i
         iy = _axis_cell(pos[i, 1], n[1], size[1], box[1], False)
         iz = _axis_cell(pos[i, 2], n[2], size[2], box[2], True)
         hit = 0
-        for sx in range(3):
-            cx = _layer(ix, n[0], True, sx)
-            if cx < 0:
+        for s in range(27):
+            c = _stencil_cell(ix, iy, iz, n, s)
+            if c < 0:
                 continue
-            for sy in range(3):
-                cy = _layer(iy, n[1], False, sy)
-                if cy < 0:
+            for m in range(start[c], start[c] + count[c]):
+                j = ids[order[m]]
+                if j == i:
                     continue
-                for sz in range(3):
-                    cz = _layer(iz, n[2], True, sz)
-                    if cz < 0:
-                        continue
-                    c = (cx * n[1] + cy) * n[2] + cz
-                    for m in range(start[c], start[c] + count[c]):
-                        j = ids[order[m]]
-                        if j == i:
-                            continue
-                        dx = _min_image(pos[i, 0] - pos[j, 0], box[0])
-                        dy = pos[i, 1] - pos[j, 1]
-                        dz = _min_image(pos[i, 2] - pos[j, 2], box[2])
-                        lim = rho[i] + rho[j] + reach[i] + reach[j] + skin
-                        if dx * dx + dy * dy + dz * dz < lim * lim:
-                            hit = 1
-                            break
-                    if hit:
-                        break
-                if hit:
+                dx = _min_image(pos[i, 0] - pos[j, 0], box[0])
+                dy = pos[i, 1] - pos[j, 1]
+                dz = _min_image(pos[i, 2] - pos[j, 2], box[2])
+                lim = rho[i] + rho[j] + reach[i] + reach[j] + skin
+                if dx * dx + dy * dy + dz * dz < lim * lim:
+                    hit = 1
                     break
             if hit:
                 break
@@ -435,31 +434,22 @@ def _list_pass(cp, comps, grain_of, dcomp, creach, skin, box, n, size, start, co
         iy = _axis_cell(cp[a, 1], n[1], size[1], box[1], False)
         iz = _axis_cell(cp[a, 2], n[2], size[2], box[2], True)
         k = 0
-        for sx in range(3):
-            cx = _layer(ix, n[0], True, sx)
-            if cx < 0:
+        for s in range(27):
+            c = _stencil_cell(ix, iy, iz, n, s)
+            if c < 0:
                 continue
-            for sy in range(3):
-                cy = _layer(iy, n[1], False, sy)
-                if cy < 0:
+            for m in range(start[c], start[c] + count[c]):
+                b = comps[order[m]]
+                if grain_of[b] == ga:
                     continue
-                for sz in range(3):
-                    cz = _layer(iz, n[2], True, sz)
-                    if cz < 0:
-                        continue
-                    c = (cx * n[1] + cy) * n[2] + cz
-                    for m in range(start[c], start[c] + count[c]):
-                        b = comps[order[m]]
-                        if grain_of[b] == ga:
-                            continue
-                        dx = _min_image(cp[a, 0] - cp[b, 0], box[0])
-                        dy = cp[a, 1] - cp[b, 1]
-                        dz = _min_image(cp[a, 2] - cp[b, 2], box[2])
-                        lim = 0.5 * (dcomp[a] + dcomp[b]) + creach[a] + creach[b] + skin
-                        if dx * dx + dy * dy + dz * dz < lim * lim:
-                            if k < cap:
-                                nbr[a, k] = b
-                            k += 1
+                dx = _min_image(cp[a, 0] - cp[b, 0], box[0])
+                dy = cp[a, 1] - cp[b, 1]
+                dz = _min_image(cp[a, 2] - cp[b, 2], box[2])
+                lim = 0.5 * (dcomp[a] + dcomp[b]) + creach[a] + creach[b] + skin
+                if dx * dx + dy * dy + dz * dz < lim * lim:
+                    if k < cap:
+                        nbr[a, k] = b
+                    k += 1
         cnt[a] = k
         most[q] = k
     return most.max() if comps.shape[0] > 0 else 0
