@@ -4,7 +4,10 @@ For each Zingg class, composites of nominal diameter Dn = 0.7 ... 5.5 mm (axis r
 given below), quartz (2650 kg/m³) in water (ν = 1e-6 m²/s), dropped from rest at a
 tilted orientation; terminal velocity against Haider & Levenspiel (1989) at the
 sphericity of the ellipsoid with the same axes, and against the sphere of the
-composite's own volume (Yen drag). Writes settling.csv, settling.png; prints the table.
+composite's own volume (Yen drag); orientation at the start and the end (|cos| of the
+short and of the long body axis with the vertical: a grain falling with its largest
+projection across the fall has short ≈ 1 (disk, blade) or long ≈ 0 (rod)). Writes
+settling.csv, settling.png (third panel: the long axis in time); prints the table.
 
     python benchmarks/shapes_settling.py [--out DIR] [--quick]
 """
@@ -26,7 +29,7 @@ DN_MM = (0.7, 1.5, 3.0, 5.5)
 TILT_QUAT = (math.cos(0.35), math.sin(0.35) * 0.6, 0.0, math.sin(0.35) * 0.8)  # ≈ 40° off
 
 
-def table(dn_list=DN_MM, duration=60.0):
+def table(dn_list=DN_MM, duration=60.0, series=None):
     rows = []
     for name, p, q in SHAPES:
         for dn_mm in dn_list:
@@ -50,17 +53,21 @@ def table(dn_list=DN_MM, duration=60.0):
                              w_sphere_same_volume_m_s=w_sph, ratio_to_sphere=res["w_m_s"] / w_sph,
                              w_sphere_Dn_m_s=w_sph_dn,
                              short_axis_vertical_start=res["tilt"][0], short_axis_vertical_end=res["tilt"][-1],
+                             long_axis_vertical_start=res["long_axis"][0],
+                             long_axis_vertical_end=res["long_axis"][-1],
                              unsteadiness=res["steady"]))
+            if series is not None:
+                series.append((name, dn_mm, res["t"], res["long_axis"]))
     return pd.DataFrame(rows)
 
 
-def figure(df, path):
+def figure(df, path, series=()):
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(1, 2, figsize=(11, 4.5))
+    fig, ax = plt.subplots(1, 3, figsize=(16, 4.5))
     for name, g in df.groupby("shape"):
         ax[0].plot(g.Dn_mm, g.w_composite_m_s * 100, "o-", label=f"{name} (composite)")
         ax[0].plot(g.Dn_mm, g.w_haider_levenspiel_m_s * 100, "x:", color=ax[0].lines[-1].get_color())
@@ -74,6 +81,13 @@ def figure(df, path):
     ax[1].set_xlabel("sphericity ψ of the ellipsoid")
     ax[1].set_ylabel("w_composite / w_HL")
     ax[1].legend(fontsize=7)
+    dn_show = max(s[1] for s in series) if series else None
+    for name, dn_mm, t, la in series:
+        if dn_mm == dn_show:
+            ax[2].plot(t, la, label=name)
+    ax[2].set_xlabel("t (Dn / √(g R Dn))")
+    ax[2].set_ylabel(f"|cos| long axis vs vertical (Dn = {dn_show} mm; 0 = horizontal)")
+    ax[2].legend(fontsize=7)
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)
@@ -86,12 +100,14 @@ def main(argv=None):
     args = ap.parse_args(argv)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    df = table((0.7, 5.5) if args.quick else DN_MM)
+    series = []
+    df = table((0.7, 5.5) if args.quick else DN_MM, series=series)
     df.to_csv(out / "settling.csv", index=False)
-    figure(df, out / "settling.png")
+    figure(df, out / "settling.png", series)
     cols = ["shape", "n_spheres", "Dn_mm", "psi_ellipsoid", "psi_composite", "w_composite_m_s",
             "w_haider_levenspiel_m_s", "ratio_to_HL", "w_sphere_same_volume_m_s", "ratio_to_sphere",
-            "short_axis_vertical_start", "short_axis_vertical_end"]
+            "short_axis_vertical_start", "short_axis_vertical_end", "long_axis_vertical_start",
+            "long_axis_vertical_end"]
     with pd.option_context("display.width", 200, "display.max_columns", 20, "display.precision", 3):
         print(df[cols].to_string(index=False))
     print(f"wrote {out / 'settling.csv'}, {out / 'settling.png'}")

@@ -391,6 +391,10 @@ class ForcesConfig(_Table):
                       doc="spin law in free flight: rotational drag relaxing the grain's spin "
                           "toward half the fluid vorticity (SPEC §2, spin.py); false: spin "
                           "changes only at contacts")
+    wake_shielding: bool = _key(True, kind="bool",
+                                doc="bonded-sphere grains: a component sphere in the wake of "
+                                    "another sphere of the same grain feels less drag "
+                                    "(clusters.wake_factor); no effect on spheres")
     added_mass_coefficient: float = _key(0.5, kind="float", ge=0.0, doc="Cm")
     lift_coefficient: float = _key(0.2, kind="float", ge=0.0, doc="C_L")
     magnus_coefficient: float = _key(1.0, kind="float", ge=0.0, doc="C_Ω")

@@ -172,7 +172,8 @@ class ClusterSimulation:
         st = clusters.make_cluster_state(self.composites, pos, vel, quat, spin, 0.0, self.n_window,
                                          R=c.submerged_specific_gravity, Cm=self.coef[CM],
                                          re_star=self.re_star, jump_capacity=JUMP_CAPACITY,
-                                         spin_drag=c.forces.spin)
+                                         spin_drag=c.forces.spin,
+                                         wake_shielding=c.forces.wake_shielding)
         low = clusters.lowest_points(st)
         lift = np.maximum(MIN_START_BOTTOM - low, 0.0)
         if np.any(lift > 0):

@@ -78,13 +78,15 @@ def dimensionless(w, dn, R=1.65, nu=NU, g=GRAVITY):
 
 
 def terminal_velocity(composite, *, density=2650.0, nu=NU, quat=(1.0, 0.0, 0.0, 0.0),
-                      duration=80.0, dt=0.01, basset=True, n_window=10):
+                      duration=80.0, dt=0.01, basset=True, n_window=10, wake_shielding=True):
     """Drop ``composite`` (shapes.Composite, lengths in m) from rest in still water.
 
     Particle units: length Dn, velocity √(g R Dn) (config's "still" rule: τ* = 1,
     Re* = Rp). Returns dict(w_m_s, w_particle, t, vy, tilt) where ``tilt`` is
     |cos| of the angle between the body z axis (short axis) and the vertical, sampled
-    over the run, and w is the mean −v_y over the last 10 % of the run."""
+    over the run, ``long_axis`` the same for the body x axis (long axis; 0 = horizontal),
+    and w is the mean −v_y over the last 10 % of the run. The largest projection is
+    across the fall when tilt → 1 (disks, blades) or long_axis → 0 (rods)."""
     from flowfields import profile_dataset
 
     from . import clusters, history
@@ -99,11 +101,12 @@ def terminal_velocity(composite, *, density=2650.0, nu=NU, quat=(1.0, 0.0, 0.0, 
     n_steps = int(round(duration / dt))
     start = 10.0 * duration  # far above the bed: it never lands
     st = clusters.make_cluster_state([g], [[0.0, start, 0.0]], [[0.0, 0.0, 0.0]], [quat],
-                                     [[0.0, 0.0, 0.0]], 0.0, n_window, R=R, Cm=coef[CM], re_star=rp)
+                                     [[0.0, 0.0, 0.0]], 0.0, n_window, R=R, Cm=coef[CM], re_star=rp,
+                                     wake_shielding=wake_shielding)
     w = clusters.make_cluster_work(st)
     hc = history.make_history_coefficients(dt, n_window)
     chunk = max(1, n_steps // 200)
-    ts, vy, tilt = [], [], []
+    ts, vy, tilt, long_axis = [], [], [], []
     done = 0
     bed = np.array([0.65, 0.1, math.radians(30.0)])
     while done < n_steps:
@@ -114,9 +117,10 @@ def terminal_velocity(composite, *, density=2650.0, nu=NU, quat=(1.0, 0.0, 0.0, 
         ts.append(done * dt)
         vy.append(st.vel[0, 1])
         tilt.append(abs(rot[1, 2]))
+        long_axis.append(abs(rot[1, 0]))
     vy = np.array(vy)
     tail = vy[int(0.9 * len(vy)):]
     wp = float(-tail.mean())
     scale = math.sqrt(GRAVITY * R * dn)
     return dict(w_m_s=wp * scale, w_particle=wp, steady=float(np.ptp(tail) / max(wp, 1e-30)),
-                t=np.array(ts), vy=vy, tilt=np.array(tilt), omega_end=st.omega[0].copy())
+                t=np.array(ts), vy=vy, tilt=np.array(tilt), long_axis=np.array(long_axis), omega_end=st.omega[0].copy())

@@ -128,3 +128,32 @@ def test_bed_impacts_never_create_energy():
     assert st.impacts.min() >= 1
     assert np.all(energy() <= e0 * (1 + 1e-6) + 1e-9)
     assert np.all(clusters.lowest_points(st) >= -1e-2)
+
+
+def test_wake_factor_tandem_side_by_side_and_size():
+    # two touching unit spheres, slip of the grain along −x (fluid moves +x relative to it)
+    d = np.array([1.0, 1.0])
+    rw = np.array([[-0.5, 0.0, 0.0], [0.5, 0.0, 0.0]])
+    ur = (-1.0, 0.0, 0.0)  # u_k − u_f
+    lead = clusters.wake_factor(0, 2, 0, rw, d, *ur, 1.0, 0.5, 6.0)
+    trail = clusters.wake_factor(0, 2, 1, rw, d, *ur, 1.0, 0.5, 6.0)
+    assert lead == 1.0 and trail == pytest.approx(0.5, abs=1e-14)
+    # 4 diameters apart: the deficit decays as exp(−(L/d − 1)/λ)
+    far = np.array([[-2.0, 0.0, 0.0], [2.0, 0.0, 0.0]])
+    assert clusters.wake_factor(0, 2, 1, far, d, *ur, 1.0, 0.5, 6.0) == pytest.approx(1 - 0.5 * math.exp(-0.5))
+    # side by side (offset across the slip by one diameter): no shielding
+    side = np.array([[0.0, -0.5, 0.0], [0.0, 0.5, 0.0]])
+    assert clusters.wake_factor(0, 2, 1, side, d, *ur, 1.0, 0.5, 6.0) == 1.0
+    assert clusters.wake_factor(0, 2, 0, side, d, *ur, 1.0, 0.5, 6.0) == 1.0
+    # half a radius off the axis: lateral overlap 1 − (0.25/1)² of the frontal disks
+    off = np.array([[-0.5, 0.0, 0.0], [0.5, 0.25, 0.0]])
+    assert clusters.wake_factor(0, 2, 1, off, d, *ur, 1.0, 0.5, 6.0) == pytest.approx(1 - 0.5 * (1 - 0.0625))
+    # a small sphere behind a big one is fully covered; a big one behind a small one partly
+    d2 = np.array([2.0, 1.0])
+    rw2 = np.array([[-0.75, 0.0, 0.0], [0.75, 0.0, 0.0]])
+    assert clusters.wake_factor(0, 2, 1, rw2, d2, *ur, 1.0, 0.5, 6.0) == pytest.approx(0.5)
+    d3 = np.array([1.0, 2.0])  # leader d = 1 at L = 1.5: 0.5 diameters beyond contact
+    expect = 1 - 0.5 * 0.25 * math.exp(-0.5 / 6.0)
+    assert clusters.wake_factor(0, 2, 1, rw2, d3, *ur, 1.0, 0.5, 6.0) == pytest.approx(expect)
+    # no slip: no wake
+    assert clusters.wake_factor(0, 2, 1, rw, d, 0.0, 0.0, 0.0, 0.0, 0.5, 6.0) == 1.0
