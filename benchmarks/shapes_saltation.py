@@ -4,7 +4,8 @@ diameter on the shipped LES (issue 6 item 5; seed 000 §4.4).
 For each flow intensity τ*/τ*c: one run of N composite grains (Smith 2003 class
 fractions, nominal diameter Dn = 0.69 mm, shape = "mixture") and one run of N spheres of
 d = Dn, same case otherwise (shipped LES channel395, its box at the run's u*, virtual
-bed with Schmeeckle et al. 2001 coefficients, all forces on, grain–grain contacts off,
+bed — or ``--bed packed``, the hexagonal layer — with Schmeeckle et al. 2001
+coefficients, all forces on, grain–grain contacts off,
 same seed: same start positions, velocities and spins). Both go through
 ``saltation.run`` — the mixture by ``particle.shape = "mixture"``.
 
@@ -20,7 +21,7 @@ q* scales with the number of grains per bed area: it is compared between runs wi
 same N (and box), and its ratio to Ackers–White says how far the run's load is from the
 capacity load, not how good the model is.
 
-    python benchmarks/shapes_saltation.py --out runs/shapes_saltation [--n 200] [--duration 4]
+    python benchmarks/shapes_saltation.py --out runs/shapes_saltation [--n 200] [--duration 4] [--bed packed]
 """
 from __future__ import annotations
 
@@ -41,12 +42,12 @@ from saltation.shapes import CLASSES
 DN = 0.69e-3  # m, nominal diameter (seed 003's validation grain)
 
 
-def case(n, duration, tau_ratio, seed, threads):
+def case(n, duration, tau_ratio, seed, threads, bed="virtual"):
     return {
         "particle": {"diameter": DN, "density": 2650.0},
         "fluid": {"density": 1000.0, "viscosity": 1.0e-6},
         "flow": {"source": "les", "tau_ratio": tau_ratio, "tau_c": 0.032},
-        "bed": {"model": "virtual", "coefficients": "schmeeckle-2001"},
+        "bed": {"model": bed, "coefficients": "schmeeckle-2001"},
         "collisions": {"model": "off"},
         "run": {"n_particles": n, "duration": duration, "dt_particle": 0.01, "seed": seed, "threads": threads},
         "output": {"vtk": False, "variance": False},
@@ -137,12 +138,13 @@ def main(argv=None):
     ap.add_argument("--tau-ratios", type=float, nargs="+", default=[1.79, 2.43])
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--threads", type=int, default=1)
+    ap.add_argument("--bed", choices=("virtual", "packed"), default="virtual", help="bed.model of both runs")
     args = ap.parse_args(argv)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     rows, meta = [], []
     for tau in args.tau_ratios:
-        base = case(args.n, args.duration, tau, args.seed, args.threads)
+        base = case(args.n, args.duration, tau, args.seed, args.threads, args.bed)
         t0 = time.perf_counter()
         sph = run(base, out=out / f"sphere_{tau:g}", progress=False)
         t1 = time.perf_counter()
@@ -164,7 +166,7 @@ def main(argv=None):
     table = pd.DataFrame(rows)
     table.to_csv(out / "shapes_saltation.csv", index=False)
     (out / "shapes_saltation.json").write_text(json.dumps({"runs": meta, "n": args.n, "duration_s": args.duration,
-                                                           "seed": args.seed}, indent=1, default=str))
+                                                           "seed": args.seed, "bed": args.bed}, indent=1, default=str))
     figure(table, out / "shapes_saltation.png")
     cols = ["tau_ratio", "run", "group", "grains", "jumps", "low_jump_frac", "H_mean", "H_std", "L_mean", "L_std", "U_mean",
             "U_std", "omega_z", "omega_abs", "volume_mean_d3", "u_volume_mean", "q_star", "q_star_AW", "ratio_AW"]

@@ -84,6 +84,9 @@ frictionless one (checked each time). If the contact point still descends afterw
 a second impact on the horizontal bed follows (as ``bed.bed_rebound``). Jump height
 is the highest elevation of the grain's lowest point above the bed top.
 
+With bed.model = "packed" (``bed[BED_MODEL] = BED_PACKED``) step_grain leaves the bed
+alone and cluster_bed.py applies the hexagonal layer of fixed spheres after the move.
+
 Grain–grain contacts between composites are not in this module: cluster_contacts.py
 acts on the component spheres of different grains after each free-flight step
 (``advance_clusters_contacts``; ``advance_clusters`` here is the run without them).
@@ -112,6 +115,8 @@ NOT_FINITE = 1
 JUMP_FIELDS = 4
 NX = 13  # x(3) v(3) q(4) Ω(3)
 SQRT_PI = math.sqrt(math.pi)
+BED_MODEL = 3  # bed[BED_MODEL]: absent or 0 → the virtual bed here; BED_PACKED → cluster_bed.py
+BED_PACKED = 1.0
 SAME_IMPACT_DT = 1e-9  # d/u*: two bed impacts closer in time are one contact event
 # wake shielding of a component by an upstream component of the same grain (docstring)
 WAKE_A = 0.5  # drag deficit of a trailing sphere touching its leader, on the axis
@@ -728,7 +733,6 @@ def _impulse(st, p, rcx, rcy, rcz, n0, n1, n2, e, fr, iw):
 def _kinetic(st, p, iw):
     # rigid kinetic energy ½ m v² + ½ Ω·I Ω with I = iw⁻¹ (use L = I Ω via solve-free form)
     v = st.vel[p]
-    o = st.omega[p]
     ke = 0.5 * st.mass[p] * (v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
     # Ω·IΩ: I Ω from the body inertia
     return ke + 0.5 * _omega_i_omega(st, p)
@@ -917,6 +921,8 @@ def step_grain(f, coef, bed, seed, st, w, hc, p, t, dt):
     st.fresh[p] = 1
     if with_basset:
         _basset_end_step(coef, st, w, hc, p, dt)
+    if bed.shape[0] > BED_MODEL and bed[BED_MODEL] == BED_PACKED:
+        return  # the packed bed acts after the move (cluster_bed.py)
     y_new, kb = _lowest(st, w, p, st.pos[p, 0], st.pos[p, 1], st.pos[p, 2], st.quat[p, 0], st.quat[p, 1],
                         st.quat[p, 2], st.quat[p, 3])
     if y_new < 0.0:

@@ -50,7 +50,7 @@ import numpy as np
 from numba import njit
 
 from .bed import NO_IMPACT, rebound
-from .cells import CellGrid, allocate_cells, build_cells, make_grid, min_image
+from .cells import allocate_cells, build_cells, make_grid, min_image
 from .history import META_COUNT
 
 RADIUS = 0.5  # grain radius (d)
@@ -86,80 +86,100 @@ def hexagonal_layer(lx: float, lz: float) -> tuple[np.ndarray, float, float]:
     return centres, sx, sz
 
 
-def make_packed_bed(lx: float, lz: float) -> PackedBed:
-    """The bed layer for a particle domain lx × lz (d), sorted into cells of ≥ 1 d.
+def make_packed_bed(lx: float, lz: float, cut: float = 1.0) -> PackedBed:
+    """The bed layer for a particle domain lx × lz (d), sorted into cells of ≥ ``cut``
+    (≥ 1 d: the largest contact distance of a grain centre and a bed sphere centre).
 
     Raises ValueError for a domain under 3 d in x or z (SPEC §9 keeps domains ≥ 3 d)."""
     if not (lx >= 3.0 and lz >= 3.0):
         raise ValueError(f"packed bed needs a domain of at least 3 d in x and z, got {lx!r} × {lz!r} d")
     centres, sx, sz = hexagonal_layer(lx, lz)
-    grid = make_grid((lx, 1.0, lz), 1.0, (True, False, True))
+    grid = make_grid((lx, 1.0, lz), max(1.0, float(cut)), (True, False, True))
     cell_of, cell_start, cell_count, order = allocate_cells(len(centres), grid)
     build_cells(centres, grid, cell_of, cell_start, cell_count, order)
     return PackedBed(centres, grid.box, grid.n, grid.size, cell_start, cell_count, order, np.array([sx, sz]))
 
 
-@njit(cache=True, _nrt=False)
-def _nearest_entry(pb, x, y, z, u, v, w, limit):
-    """The overlapped bed sphere the grain at (x, y, z) moving with (u, v, w) entered
-    first within the last ``limit`` time: (sphere id or −1, τ ≤ limit, offset from the
-    centre at the grain's position). τ is the positive root of |a − τ u| = 1."""
+@njit(cache=True, _nrt=False, inline="always")
+def bed_cell(pb, x, z):
+    """(ix, iz) of the bed cell holding the point (x, z) (periodic)."""
     lx, lz = pb.box[0], pb.box[2]
-    nx, nz = pb.ncell[0], pb.ncell[2]
-    hx, hz = pb.size[0], pb.size[2]
     sx = x - lx * math.floor(x / lx)
     sz = z - lz * math.floor(z / lz)
-    ix = min(int(sx / hx), nx - 1)
-    iz = min(int(sz / hz), nz - 1)
+    return min(int(sx / pb.size[0]), pb.ncell[0] - 1), min(int(sz / pb.size[2]), pb.ncell[2] - 1)
+
+
+@njit(cache=True, _nrt=False, inline="always")
+def bed_stencil_cell(pb, ix, iz, s):
+    """Cell id of entry s (0..8) of the 3 × 3 cells around (ix, iz); one layer in y."""
+    nx, nz = pb.ncell[0], pb.ncell[2]
+    return ((ix + s // 3 - 1) % nx) * nz + (iz + s % 3 - 1) % nz
+
+
+@njit(cache=True, _nrt=False, inline="always")
+def bed_offset(pb, k, x, y, z):
+    """Minimum-image offset (x, y, z) − centre of bed sphere k."""
+    return (min_image(x - pb.centres[k, 0], pb.box[0], 1), y - pb.centres[k, 1],
+            min_image(z - pb.centres[k, 2], pb.box[2], 1))
+
+
+@njit(cache=True, _nrt=False, inline="always")
+def end_jump(st, p, length, height, t_hit):
+    """A bed impact at t_hit closes grain p's jump (length, height in d): record it."""
+    j = st.jump_buf_n[p]
+    if j < st.jump_buf.shape[1]:
+        st.jump_buf[p, j, 0] = st.jump_t0[p]
+        st.jump_buf[p, j, 1] = length
+        st.jump_buf[p, j, 2] = height
+        st.jump_buf[p, j, 3] = t_hit - st.jump_t0[p]
+        st.jump_buf_n[p] = j + 1
+    st.jump_count[p] += 1
+
+
+@njit(cache=True, _nrt=False)
+def _nearest_entry(pb, x, y, z, u, v, w, limit, reach):
+    """The overlapped bed sphere the grain at (x, y, z) moving with (u, v, w) entered
+    first within the last ``limit`` time: (sphere id or −1, τ ≤ limit). ``reach``: the
+    contact distance of centres (1 for a grain of d = 1; ½ + r for a sphere of radius r,
+    at most one cell). τ is the positive root of |a − τ u| = reach."""
+    ix, iz = bed_cell(pb, x, z)
     best = -1
     best_tau = -1.0
     v2 = u * u + v * v + w * w
-    for a in range(-1, 2):
-        cx = (ix + a) % nx
-        for b in range(-1, 2):
-            cz = (iz + b) % nz
-            c = cx * nz + cz  # one layer in y: (cx·1 + 0)·nz + cz
-            for q in range(pb.cell_start[c], pb.cell_start[c] + pb.cell_count[c]):
-                k = pb.order[q]
-                ax = min_image(x - pb.centres[k, 0], lx, 1)
-                ay = y - pb.centres[k, 1]
-                az = min_image(z - pb.centres[k, 2], lz, 1)
-                a2 = ax * ax + ay * ay + az * az
-                if a2 >= 1.0:
-                    continue
-                if v2 > 0.0:
-                    av = ax * u + ay * v + az * w
-                    tau = (av + math.sqrt(max(av * av - v2 * (a2 - 1.0), 0.0))) / v2
-                else:
-                    tau = limit
-                tau = min(max(tau, 0.0), limit)
-                if tau > best_tau:
-                    best_tau = tau
-                    best = k
+    r2 = reach * reach
+    for s in range(9):
+        c = bed_stencil_cell(pb, ix, iz, s)
+        for q in range(pb.cell_start[c], pb.cell_start[c] + pb.cell_count[c]):
+            k = pb.order[q]
+            ax, ay, az = bed_offset(pb, k, x, y, z)
+            a2 = ax * ax + ay * ay + az * az
+            if a2 >= r2:
+                continue
+            if v2 > 0.0:
+                av = ax * u + ay * v + az * w
+                tau = (av + math.sqrt(max(av * av - v2 * (a2 - r2), 0.0))) / v2
+            else:
+                tau = limit
+            tau = min(max(tau, 0.0), limit)
+            if tau > best_tau:
+                best_tau = tau
+                best = k
     return best, best_tau
 
 
 @njit(cache=True, _nrt=False)
 def bed_overlap(pb, x, y, z):
     """Largest overlap (d) of a grain at (x, y, z) with any bed sphere (0 if none)."""
-    lx, lz = pb.box[0], pb.box[2]
     worst = 0.0
-    nx, nz = pb.ncell[0], pb.ncell[2]
-    sx = x - lx * math.floor(x / lx)
-    sz = z - lz * math.floor(z / lz)
-    ix = min(int(sx / pb.size[0]), nx - 1)
-    iz = min(int(sz / pb.size[2]), nz - 1)
-    for a in range(-1, 2):
-        for b in range(-1, 2):
-            c = ((ix + a) % nx) * nz + (iz + b) % nz
-            for q in range(pb.cell_start[c], pb.cell_start[c] + pb.cell_count[c]):
-                k = pb.order[q]
-                ax = min_image(x - pb.centres[k, 0], lx, 1)
-                ay = y - pb.centres[k, 1]
-                az = min_image(z - pb.centres[k, 2], lz, 1)
-                r = math.sqrt(ax * ax + ay * ay + az * az)
-                if 1.0 - r > worst:
-                    worst = 1.0 - r
+    ix, iz = bed_cell(pb, x, z)
+    for s in range(9):
+        c = bed_stencil_cell(pb, ix, iz, s)
+        for q in range(pb.cell_start[c], pb.cell_start[c] + pb.cell_count[c]):
+            k = pb.order[q]
+            ax, ay, az = bed_offset(pb, k, x, y, z)
+            r = math.sqrt(ax * ax + ay * ay + az * az)
+            if 1.0 - r > worst:
+                worst = 1.0 - r
     return worst
 
 
@@ -167,36 +187,28 @@ def bed_overlap(pb, x, y, z):
 def _push_out(pb, pos):
     """Move the grain radially out of every bed sphere it overlaps (Gauss–Seidel);
     returns True when it overlapped any."""
-    lx, lz = pb.box[0], pb.box[2]
-    nx, nz = pb.ncell[0], pb.ncell[2]
     touched = False
     for sweep in range(PUSH_SWEEPS):
         moved = False
-        sx = pos[0] - lx * math.floor(pos[0] / lx)
-        sz = pos[2] - lz * math.floor(pos[2] / lz)
-        ix = min(int(sx / pb.size[0]), nx - 1)
-        iz = min(int(sz / pb.size[2]), nz - 1)
-        for a in range(-1, 2):
-            for b in range(-1, 2):
-                c = ((ix + a) % nx) * nz + (iz + b) % nz
-                for q in range(pb.cell_start[c], pb.cell_start[c] + pb.cell_count[c]):
-                    k = pb.order[q]
-                    ax = min_image(pos[0] - pb.centres[k, 0], lx, 1)
-                    ay = pos[1] - pb.centres[k, 1]
-                    az = min_image(pos[2] - pb.centres[k, 2], lz, 1)
-                    r2 = ax * ax + ay * ay + az * az
-                    if r2 >= 1.0:
-                        continue
-                    r = math.sqrt(r2)
-                    if r > 0.0:
-                        s = (1.0 - r) / r * (1.0 + 1e-12)
-                        pos[0] += s * ax
-                        pos[1] += s * ay
-                        pos[2] += s * az
-                    else:
-                        pos[1] = pb.centres[k, 1] + 1.0
-                    moved = True
-                    touched = True
+        ix, iz = bed_cell(pb, pos[0], pos[2])
+        for s in range(9):
+            c = bed_stencil_cell(pb, ix, iz, s)
+            for q in range(pb.cell_start[c], pb.cell_start[c] + pb.cell_count[c]):
+                k = pb.order[q]
+                ax, ay, az = bed_offset(pb, k, pos[0], pos[1], pos[2])
+                r2 = ax * ax + ay * ay + az * az
+                if r2 >= 1.0:
+                    continue
+                r = math.sqrt(r2)
+                if r > 0.0:
+                    f = (1.0 - r) / r * (1.0 + 1e-12)
+                    pos[0] += f * ax
+                    pos[1] += f * ay
+                    pos[2] += f * az
+                else:
+                    pos[1] = pb.centres[k, 1] + 1.0
+                moved = True
+                touched = True
         if not moved:
             break
     return touched
@@ -220,16 +232,14 @@ def packed_bed_check_particle(st, w, p, t, dt, step, coef_bed, pb, last_contact)
     remaining = dt
     hits = 0
     for it in range(MAX_BOUNCES):
-        k, tau = _nearest_entry(pb, pos[0], pos[1], pos[2], vel[0], vel[1], vel[2], remaining)
+        k, tau = _nearest_entry(pb, pos[0], pos[1], pos[2], vel[0], vel[1], vel[2], remaining, 1.0)
         if k < 0:
             break
         # contact point: back along the end-of-step velocity (linear, as on the virtual bed)
         xh = pos[0] - tau * vel[0]
         yh = pos[1] - tau * vel[1]
         zh = pos[2] - tau * vel[2]
-        ax = min_image(xh - pb.centres[k, 0], pb.box[0], 1)
-        ay = yh - pb.centres[k, 1]
-        az = min_image(zh - pb.centres[k, 2], pb.box[2], 1)
+        ax, ay, az = bed_offset(pb, k, xh, yh, zh)
         r = math.sqrt(ax * ax + ay * ay + az * az)
         if r == 0.0:
             ax, ay, az, r = 0.0, 1.0, 0.0, 1.0
@@ -254,14 +264,7 @@ def packed_bed_check_particle(st, w, p, t, dt, step, coef_bed, pb, last_contact)
         if hits == 1:
             if last_contact[p] < step - 1:
                 # airborne since an earlier step: a jump ends here (SPEC §6)
-                j = st.jump_buf_n[p]
-                if j < st.jump_buf.shape[1]:
-                    st.jump_buf[p, j, 0] = st.jump_t0[p]
-                    st.jump_buf[p, j, 1] = xh - st.jump_x0[p]
-                    st.jump_buf[p, j, 2] = st.jump_ymax[p] - RADIUS
-                    st.jump_buf[p, j, 3] = t_hit - st.jump_t0[p]
-                    st.jump_buf_n[p] = j + 1
-                st.jump_count[p] += 1
+                end_jump(st, p, xh - st.jump_x0[p], st.jump_ymax[p] - RADIUS, t_hit)
             st.jump_t0[p] = t_hit
             st.jump_x0[p] = xh
         st.hist_meta[p, META_COUNT] = 0  # the Basset history restarts (history.py)

@@ -35,11 +35,14 @@ Dn, contact_phase), ``timing.particle_collisions_s`` the wall time of the contac
 ``timing.particle_collisions_share`` its share of the stepping time (compile excluded);
 particles.parquet the collisions and largest overlap of each grain.
 
+Bed: the virtual bed (clusters.py, inside the free-flight kernel, so the timing has no
+separate bed share: ``timing.bed_s`` = 0, said in ``timing.note``) or, with
+bed.model = "packed", the hexagonal layer of fixed spheres of diameter Dn acting on
+every component sphere (cluster_bed.py, a pass after each step, timed as bed_s).
+
 Not here (clear errors instead): binary hard-sphere contacts for composites
-(collisions.model = "hard"), the packed bed, checkpoints and --resume. ParaView output
-holds the centres of mass (diameter = Dn). The bed rebound is computed inside the
-free-flight kernel, so the timing has no separate bed share (``timing.bed_s`` = 0,
-said in ``timing.note``).
+(collisions.model = "hard"), checkpoints and --resume. ParaView output holds the
+centres of mass (diameter = Dn).
 """
 from __future__ import annotations
 
@@ -51,11 +54,12 @@ import numba
 import numpy as np
 import pandas as pd
 
-from . import cluster_contacts, clusters, history, shapes
+from . import cluster_bed, cluster_contacts, clusters, history, shapes
 from .config import Case, CaseError, dump_toml
 from .contacts import contact_model_from_case
 from .forces import CM, make_coefficients
 from .initial import Y_RANGE, initial_conditions
+from .packed_bed import make_packed_bed
 from .writers import ClusterTrackWriter, JumpWriter, ParaViewWriter, write_json
 
 DISCARDED_JUMPS = 10  # as run.py (paper §3.2)
@@ -81,11 +85,6 @@ def check_case(case: Case) -> None:
             f'collisions.model = "hard" is not available with particle.shape = "{case.particle.shape}": '
             f'bonded-sphere grains have soft grain–grain contacts only (cluster_contacts.py); set '
             f'collisions.model = "soft" or "off" (--set collisions.model=soft)', "collisions", "model")
-    if case.bed.model != "virtual":
-        raise CaseError(
-            f'bed.model = "{case.bed.model}" is not available with particle.shape = '
-            f'"{case.particle.shape}": bonded-sphere grains rebound on the virtual bed only; '
-            f'set bed.model = "virtual"', "bed", "model")
 
 
 def random_quaternions(n: int, rng) -> np.ndarray:
@@ -145,7 +144,12 @@ class ClusterSimulation:
             C_Omega=f.magnus_coefficient, weight=f.weight, drag=f.drag, lift=f.lift, magnus=f.magnus,
             added_mass=f.added_mass, fluid_acceleration=f.fluid_acceleration, basset=f.basset,
             spin=f.spin)
-        self.bed = np.array([case.bed_restitution, case.bed_friction, case.bed.max_tilt_radians])
+        self.packed = case.bed.model == "packed"
+        self.bed = np.array([case.bed_restitution, case.bed_friction, case.bed.max_tilt_radians,
+                             clusters.BED_PACKED if self.packed else 0.0])
+        self.pb = None  # packed bed (cluster_bed.py), built with the state
+        self.last_contact = np.full(self.n, -2, np.int64)
+        self.bed_s = 0.0
         self.n_window = f.basset_window
         self.hist_coef = history.make_history_coefficients(self.dt, self.n_window)
         self.top_d = float(flow.y[-1]) / self.re_star
@@ -201,6 +205,26 @@ class ClusterSimulation:
         self.mu_min = float(cluster_contacts.point_effective_masses(st).min())
 
     def _advance(self, f, st, w, seed, t0, n):
+        if self.pb is None:
+            return self._advance_flight(f, st, w, seed, t0, n)
+        # packed bed: after each step's move (free flight, contacts), cluster_bed.py
+        step0 = int(round(t0 / self.dt))
+        cap = st.jump_buf.shape[1]
+        if n == 0:  # compile call: the state is above the bed, nothing happens
+            self._advance_flight(f, st, w, seed, t0, 0)
+            cluster_bed.packed_bed_pass(st, w, t0, self.dt, step0 - 1, self.bed, self.pb, self.last_contact)
+            return 0
+        for s in range(n):
+            t = t0 + s * self.dt
+            done = self._advance_flight(f, st, w, seed, t, 1)
+            c0 = time.perf_counter()
+            cluster_bed.packed_bed_pass(st, w, t, self.dt, step0 + s, self.bed, self.pb, self.last_contact)
+            self.bed_s += time.perf_counter() - c0
+            if done < 1 or np.any(st.status != clusters.OK) or np.any(st.jump_buf_n >= cap):
+                return s + 1
+        return n
+
+    def _advance_flight(self, f, st, w, seed, t0, n):
         if self.cc is None:
             return int(clusters.advance_clusters(f, self.coef, self.bed, seed, st, w, self.hist_coef, t0, self.dt,
                                                  n, self.top_d))
@@ -267,6 +291,12 @@ class ClusterSimulation:
         w = clusters.make_cluster_work(st)
         if self.contacts:
             self._contact_setup(st)
+        if self.packed:
+            lx, lz = self.domain_d
+            try:
+                self.pb = make_packed_bed(lx, lz, cluster_bed.cut_for(st))
+            except ValueError as err:
+                raise CaseError(str(err), "run", "domain") from err
         f = self.flow.arrays
         d, ts = c.particle.diameter, c.time_scale
         jw = JumpWriter(self.out / "jumps.parquet")
@@ -415,7 +445,6 @@ class ClusterSimulation:
             if len(grains):
                 by_class[name] = _stats(jumps[np.isin(jumps[:, 0], grains)] if len(jumps) else jumps)
                 by_class[name]["grains"] = int(len(grains))
-        impacts = int(st.impacts.sum())
         n_comp = np.array([g.n_spheres for g in self.composites])
         vol = np.array([g.volume for g in self.composites])
         summary = {
@@ -515,16 +544,17 @@ class ClusterSimulation:
         return out
 
     def _timing(self, wall, compile_s, kernel_s, threads):
+        bed_s = self.bed_s
+        where = ("the packed bed: its own pass after each step (cluster_bed.py), bed_s" if self.packed else
+                 "bed rebounds are computed inside the free-flight kernel (clusters.step_grain)")
         if self.cc is None:
-            return {"wall_s": wall, "compile_s": compile_s, "kernel_s": kernel_s, "free_flight_s": kernel_s,
-                    "bed_s": 0.0, "particle_collisions_s": 0.0, "threads": threads,
-                    "note": "bed rebounds are computed inside the free-flight kernel (clusters.step_grain)"}
+            return {"wall_s": wall, "compile_s": compile_s, "kernel_s": kernel_s, "free_flight_s": kernel_s - bed_s,
+                    "bed_s": bed_s, "particle_collisions_s": 0.0, "threads": threads, "note": where}
         ff, pc = (float(x) for x in self.timers)
-        return {"wall_s": wall, "compile_s": compile_s, "kernel_s": kernel_s, "free_flight_s": ff, "bed_s": 0.0,
+        return {"wall_s": wall, "compile_s": compile_s, "kernel_s": kernel_s, "free_flight_s": ff, "bed_s": bed_s,
                 "particle_collisions_s": pc, "particle_collisions_share": pc / kernel_s if kernel_s > 0 else None,
                 "threads": threads,
-                "note": "bed rebounds are computed inside the free-flight kernel (clusters.step_grain); "
-                        "particle_collisions_s: the whole contact phase (engagement, lists, sub-steps)"}
+                "note": where + "; particle_collisions_s: the whole contact phase (engagement, lists, sub-steps)"}
 
 
 def spin_statistics(tracks: pd.DataFrame, t_from: float, class_id=None) -> dict:

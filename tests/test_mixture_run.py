@@ -102,12 +102,10 @@ def test_bad_shape_keys_are_clear_errors(over, key):
     assert f"particle.{key}" in str(err.value)
 
 
-def test_hard_contacts_and_packed_bed_are_refused_for_composites(tmp_path):
+def test_hard_contacts_are_refused_for_composites(tmp_path):
     with pytest.raises(CaseError, match='collisions.model = "hard" is not available') as err:
         run(tiny(shape="mixture"), out=tmp_path / "a", progress=False, **{"collisions.model": "hard"})
     assert err.value.key == "model"
-    with pytest.raises(CaseError, match='bed.model = "packed"'):
-        run(tiny(shape="disk"), out=tmp_path / "b", progress=False, **{"bed.model": "packed"})
 
 
 def test_fractions_and_shape_round_trip_through_the_case_file(tmp_path):
