@@ -5,7 +5,7 @@ Prints JSON: ns per particle-step (spheres), ns per component-step (composites o
 Smith mixture), their ratio (target ≤ 1.5), mean components per grain. Compile time is
 excluded (one warm-up call first).
 
-    python benchmarks/bench_shapes.py [--grains 200] [--steps 200] [--threads 1]
+    python benchmarks/bench_shapes.py [--grains 200] [--steps 1000] [--threads 1]
 """
 from __future__ import annotations
 
@@ -24,7 +24,7 @@ from saltation.forces import CM, make_coefficients
 def main(argv=None):
     ap = argparse.ArgumentParser()
     ap.add_argument("--grains", type=int, default=200)
-    ap.add_argument("--steps", type=int, default=200)
+    ap.add_argument("--steps", type=int, default=1000)
     ap.add_argument("--threads", type=int, default=1)
     a = ap.parse_args(argv)
     numba.set_num_threads(a.threads)
