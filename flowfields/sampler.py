@@ -32,7 +32,13 @@ How the kernels are made fast (they run four times per grain and time step):
   once per component (``_node3``; ~4 % less time per sample, same arithmetic);
 * ``sample_column`` samples a grain's centre (with gradient) and its top and bottom
   (velocity only) on one vertical: x, z and time are located once;
+* the periodic index is taken modulo the period in floating point (an integer division
+  per axis cost ~20 % of a sample: grains leave the first period within seconds);
 * the y search is a binary search of fixed trip count with a conditional move;
+* ``gather_cell`` / ``velocity_in_cell`` split a velocity sample into the cell's 8
+  nodes blended in time and the trilinear weights, so that a caller can reuse the
+  gathered nodes for another point of the same cell at the same time (integrator.py:
+  the two RK4 stages at t + Δt/2, and the last stage and the end-of-step sample at t + Δt);
 * the public kernels are compiled without reference counting (``_nrt=False``: they
   take arrays and allocate nothing, and an atomic increment/decrement per array
   argument and per view costs more than the arithmetic) and with fused multiply-add
@@ -76,9 +82,12 @@ def _locate_periodic(s, s0, ds, n):
     q = (s - s0) / ds
     fl = np.floor(q)
     w = q - fl
-    i = int(fl) % n
-    if i < 0:
-        i += n
+    # fl mod n in floating point (exact for |fl| < 2**52 / n; no integer division)
+    i = int(fl - n * np.floor(fl / n))
+    if i >= n:
+        i -= n
+    if i < 0 or i >= n:  # non-finite input
+        i = 0
     i1 = i + 1
     if i1 >= n:
         i1 = 0
@@ -101,7 +110,7 @@ def _locate_y(y, yp):
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _wall_normal(f, yp):
+def wall_normal(f, yp):
     """Where the height yp falls on the stretched y axis:
     (status, j0, j1, wy, dyc, sublayer) with dyc = y[j1] - y[j0] (0 for a single plane).
     Heights are clamped to [y[0], y[-1]]; ``sublayer`` flags yp < y[0] (SPEC §3)."""
@@ -242,45 +251,57 @@ def _sublayer_with_gradient(yp, y1, u, g, dudt):
     g[2, 1] = u1z / y1
 
 
+@njit(cache=True, inline="always")
+def gather_cell(f, n0, n1, wt, i0, i1, j0, j1, k0, k1):
+    """The 8 nodes of a located cell, each read once with its 3 components (adjacent in
+    memory) and blended in time: a tuple of 8 ``_node3`` tuples (raw stored units).
+    Points of one cell at one time share it (integrator.py reuses it between RK4 stages)."""
+    d = f.data
+    return (_node3(d, n0, n1, wt, i0, j0, k0), _node3(d, n0, n1, wt, i1, j0, k0),
+            _node3(d, n0, n1, wt, i0, j1, k0), _node3(d, n0, n1, wt, i1, j1, k0),
+            _node3(d, n0, n1, wt, i0, j0, k1), _node3(d, n0, n1, wt, i1, j0, k1),
+            _node3(d, n0, n1, wt, i0, j1, k1), _node3(d, n0, n1, wt, i1, j1, k1))
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def velocity_in_cell(f, nodes, wx, wy, wz, yp, sublayer):
+    """Velocity (u⁺, three floats) at weights (wx, wy, wz) inside a gathered cell
+    (``gather_cell``); the SPEC §3 sublayer law when ``sublayer`` (yp < y[0])."""
+    p000, p100, p010, p110, p001, p101, p011, p111 = nodes
+    u0 = _trilinear(p000[0], p100[0], p010[0], p110[0], p001[0], p101[0], p011[0], p111[0],
+                    wx, wy, wz) * f.scale[0] + f.offset[0]
+    u1 = _trilinear(p000[1], p100[1], p010[1], p110[1], p001[1], p101[1], p011[1], p111[1],
+                    wx, wy, wz) * f.scale[1] + f.offset[1]
+    u2 = _trilinear(p000[2], p100[2], p010[2], p110[2], p001[2], p101[2], p011[2], p111[2],
+                    wx, wy, wz) * f.scale[2] + f.offset[2]
+    if sublayer:
+        y1 = f.y[0]
+        r = yp / y1
+        u0 = yp + r * (u0 - y1)
+        u1 = r * u1
+        u2 = r * u2
+    return u0, u1, u2
+
+
 @njit(cache=True, inline="always", error_model="numpy")
 def _velocity_at_height(f, n0, n1, wt, i0, i1, wx, k0, k1, wz, yp, u):
     """Velocity only (u⁺) at height yp with the x, z and time location already known.
     Zero below the wall. Returns the status code."""
-    status, j0, j1, wy, _, sublayer = _wall_normal(f, yp)
+    status, j0, j1, wy, _, sublayer = wall_normal(f, yp)
     if status == BELOW_WALL:
         u[0] = 0.0
         u[1] = 0.0
         u[2] = 0.0
         return status
-    d = f.data
-    # the 8 nodes read once each, 3 components together (as in _gradient_at)
-    p000 = _node3(d, n0, n1, wt, i0, j0, k0)
-    p100 = _node3(d, n0, n1, wt, i1, j0, k0)
-    p010 = _node3(d, n0, n1, wt, i0, j1, k0)
-    p110 = _node3(d, n0, n1, wt, i1, j1, k0)
-    p001 = _node3(d, n0, n1, wt, i0, j0, k1)
-    p101 = _node3(d, n0, n1, wt, i1, j0, k1)
-    p011 = _node3(d, n0, n1, wt, i0, j1, k1)
-    p111 = _node3(d, n0, n1, wt, i1, j1, k1)
-    u[0] = _trilinear(p000[0], p100[0], p010[0], p110[0], p001[0], p101[0], p011[0], p111[0],
-                      wx, wy, wz) * f.scale[0] + f.offset[0]
-    u[1] = _trilinear(p000[1], p100[1], p010[1], p110[1], p001[1], p101[1], p011[1], p111[1],
-                      wx, wy, wz) * f.scale[1] + f.offset[1]
-    u[2] = _trilinear(p000[2], p100[2], p010[2], p110[2], p001[2], p101[2], p011[2], p111[2],
-                      wx, wy, wz) * f.scale[2] + f.offset[2]
-    if sublayer:
-        y1 = f.y[0]
-        r = yp / y1
-        u[0] = yp + r * (u[0] - y1)
-        u[1] = r * u[1]
-        u[2] = r * u[2]
+    nodes = gather_cell(f, n0, n1, wt, i0, i1, j0, j1, k0, k1)
+    u[0], u[1], u[2] = velocity_in_cell(f, nodes, wx, wy, wz, yp, sublayer)
     return status
 
 
 @njit(cache=True, inline="always", error_model="numpy")
 def _gradient_at_height(f, n0, n1, wt, i0, i1, wx, k0, k1, wz, yp, u, g, dudt):
     """u, g, ∂u/∂t (wall units) at height yp with the x, z and time location known."""
-    status, j0, j1, wy, dyc, sublayer = _wall_normal(f, yp)
+    status, j0, j1, wy, dyc, sublayer = wall_normal(f, yp)
     if status == BELOW_WALL:
         for c in range(3):
             u[c] = 0.0
@@ -299,7 +320,7 @@ def _gradient_at_height(f, n0, n1, wt, i0, i1, wx, k0, k1, wz, yp, u, g, dudt):
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _locate_xzt(f, xp, zp, tp):
+def locate_xzt(f, xp, zp, tp):
     """Periodic x and z cells and the looping time interval of a point."""
     i0, i1, wx = _locate_periodic(xp, f.x0, f.dx, f.nx)
     k0, k1, wz = _locate_periodic(zp, f.z0, f.dz, f.nz)
@@ -315,7 +336,7 @@ def sample_point(f, xp, yp, zp, tp, u, g, dudt, with_gradient=True):
 
     All in wall units. Returns a status code (OK, ABOVE_TOP, BELOW_WALL). With
     with_gradient=False only u is written (cheaper); g and dudt are left as they are."""
-    i0, i1, wx, k0, k1, wz, n0, n1, wt = _locate_xzt(f, xp, zp, tp)
+    i0, i1, wx, k0, k1, wz, n0, n1, wt = locate_xzt(f, xp, zp, tp)
     if with_gradient:
         return _gradient_at_height(f, n0, n1, wt, i0, i1, wx, k0, k1, wz, yp, u, g, dudt)
     return _velocity_at_height(f, n0, n1, wt, i0, i1, wx, k0, k1, wz, yp, u)
@@ -327,7 +348,7 @@ def sample_column(f, xp, yp, zp, tp, y_top, y_bottom, u, g, dudt, u_top, u_botto
     and dudt are left as they are) plus the velocity alone at the heights y_top and
     y_bottom of the same vertical (x, z and time located once).
     Velocities at points below the wall are zero. Returns the status of the centre."""
-    i0, i1, wx, k0, k1, wz, n0, n1, wt = _locate_xzt(f, xp, zp, tp)
+    i0, i1, wx, k0, k1, wz, n0, n1, wt = locate_xzt(f, xp, zp, tp)
     if with_gradient:
         status = _gradient_at_height(f, n0, n1, wt, i0, i1, wx, k0, k1, wz, yp, u, g, dudt)
     else:

@@ -5,7 +5,7 @@ Operator split
 --------------
 A hydrodynamic step of length Δt (d/u*) is done in three phases, in this order:
 
-1. **free flight** (integrator.free_flight_particle): RK4 with the fluid forces, every
+1. **free flight** (integrator.free_flight_particles): RK4 with the fluid forces, every
    grain on its own, from (x₀, u₀, ϖ₀) to (x₁, u₁, ϖ₁);
 2. **contacts** (this module): the grains that can touch another one during the step are
    moved again through the step in ``n_sub`` sub-steps of h = Δt/n_sub, with the fluid

@@ -9,7 +9,8 @@ from __future__ import annotations
 
 from numba import njit
 
-from flowfields.sampler import ABOVE_TOP, sample_column, sample_point, vorticity_from_gradient
+from flowfields.sampler import (ABOVE_TOP, BELOW_WALL, gather_cell, locate_xzt, sample_column, sample_point,
+                                velocity_in_cell, vorticity_from_gradient, wall_normal)
 
 
 @njit(cache=True, error_model="numpy", _nrt=False)
@@ -39,6 +40,39 @@ def fluid_at_grain(f, re_star, x, y, z, t, with_lift, uf, grad, dudt, vort, uf_t
                 grad[i, j] *= re_star
         vorticity_from_gradient(grad, vort)
     return 1 if status == ABOVE_TOP else 0
+
+
+@njit(cache=True, error_model="numpy", _nrt=False, inline="always")
+def locate_grain(f, re_star, x, y, z, t):
+    """Where a grain centre (particle units) lies in the flow data:
+    (i0, i1, wx, j0, j1, wy, k0, k1, wz, n0, n1, wt, below_wall, sublayer, y⁺).
+    With ``grain_velocity`` it gives the velocity ``fluid_at_grain`` gives (same
+    arithmetic), split so that a caller can keep the gathered cell (sampler.gather_cell)."""
+    yp = y * re_star
+    i0, i1, wx, k0, k1, wz, n0, n1, wt = locate_xzt(f, x * re_star, z * re_star, t * re_star)
+    status, j0, j1, wy, _, sublayer = wall_normal(f, yp)
+    return i0, i1, wx, j0, j1, wy, k0, k1, wz, n0, n1, wt, status == BELOW_WALL, sublayer, yp
+
+
+@njit(cache=True, error_model="numpy", _nrt=False, inline="always")
+def gather_at(f, loc):
+    """The gathered cell (sampler.gather_cell) of a ``locate_grain`` result."""
+    return gather_cell(f, loc[9], loc[10], loc[11], loc[0], loc[1], loc[3], loc[4], loc[6], loc[7])
+
+
+@njit(cache=True, error_model="numpy", _nrt=False, inline="always")
+def same_cell(a, b):
+    """Two ``locate_grain`` results at the same time share their gathered cell."""
+    return a[0] == b[0] and a[3] == b[3] and a[6] == b[6]
+
+
+@njit(cache=True, error_model="numpy", _nrt=False, inline="always")
+def grain_velocity(f, loc, nodes):
+    """Fluid velocity (u*) at a located grain centre from its gathered cell; zero below
+    the bed top (as ``fluid_at_grain``)."""
+    if loc[12]:
+        return 0.0, 0.0, 0.0
+    return velocity_in_cell(f, nodes, loc[2], loc[5], loc[8], loc[14], loc[13])
 
 
 def flow_top_in_d(dataset, re_star: float) -> float:

@@ -1,7 +1,7 @@
 """The hydrodynamic step as an operator split, with its cost accounting (SPEC §5, §6).
 
 Each step of Δt: (1) free flight of every grain (RK4 with the fluid forces, history
-closure; integrator.free_flight_particle), (2) grain–grain contacts (collide.py: soft
+closure; integrator.free_flight_particles), (2) grain–grain contacts (collide.py: soft
 spheres sub-stepped along the free-flight paths, or binary hard-sphere impulses), (3) the
 bed (virtual bed: integrator.bed_check_particle; packed bed: packed_bed.py). The order is
 fixed; collide.py explains the split. Every phase is one parallel pass over the grains,
@@ -27,7 +27,7 @@ from numba import njit, objmode, prange
 
 from .collide import hard_contact_phase, make_bed_context, make_contact_phase, soft_contact_phase
 from .contacts import contact_model_from_case, make_contact_list, rebuild
-from .integrator import OK, NOT_FINITE, bed_check_particle, free_flight_particle
+from .integrator import CHUNK, OK, NOT_FINITE, bed_check_particle, free_flight_particles
 from .packed_bed import make_packed_bed, packed_bed_check_particle
 
 CONTACTS_OFF, CONTACTS_SOFT, CONTACTS_HARD = 0, 1, 2
@@ -49,9 +49,9 @@ def _clock():
 
 @njit(cache=True, parallel=True)
 def _free_flight(f, coef, st, w, hc, t, dt):
-    for p in prange(st.pos.shape[0]):
-        if st.status[p] == OK:
-            free_flight_particle(f, coef, st, w, hc, p, t, dt)
+    n = st.pos.shape[0]
+    for c in prange((n + CHUNK - 1) // CHUNK):
+        free_flight_particles(f, coef, st, w, hc, c * CHUNK, min(n, (c + 1) * CHUNK), t, dt)
 
 
 @njit(cache=True, parallel=True)
