@@ -18,7 +18,9 @@ process pinned to one core by running it serially; ours on one Numba thread):
     velocity field (one snapshot). Ours: ``integrator.advance`` (RK4) with
     ``[forces]`` drag and weight on, lift, Magnus, added mass, fluid acceleration,
     Basset and the free-flight spin law off (OpenFOAM's parcels carry no spin; with none
-    of these on, our kernel samples the fluid velocity without its gradient),
+    of these on, our kernel takes its weight-and-drag path: the fluid velocity alone,
+    on scalars, one gathered fluid cell per time level shared by the RK4 stages in it;
+    tests/test_integrator.py checks it against the general body),
     virtual-bed rebound (``[bed]`` of cases/default.toml), sampling the shipped
     time-dependent dataset (``flowfields.open_dataset()``: trilinear in space,
     linear in time — a little more work per sample than a frozen field).

@@ -158,8 +158,9 @@ def _weight_drag_flight(f, coef, st, w, p, t, dt):
     arithmetic, on scalars instead of the workspace rows, and one fluid cell gathered
     per time level: the stages at t + dt/2 share it, and so do the last stage and the
     end-of-step sample at t + dt, whenever their points lie in the same cell
-    (sampler.gather_cell). 2.5x faster per grain-step than the general body
-    (benchmarks/bench_openfoam_tracker.py (a))."""
+    (sampler.gather_cell). Measured on one thread, 10 000 grains on the shipped LES:
+    0.63 us per grain-step against 1.0-1.1 us for the general body on the same physics
+    (before the per-chunk calls, which took both down further)."""
     re_star = coef[RE_STAR]
     pos = st.pos[p]
     vel = st.vel[p]
