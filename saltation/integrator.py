@@ -151,6 +151,22 @@ def _rhs(coef, x, basset, uf, grad, dudt, vort, uf_top, uf_bot, acc, dspin, k):
 
 
 @njit(cache=True, error_model="numpy", _nrt=False, inline="always")
+def _stage_point(f, re_star, p0, v0, dp, dv, h, t):
+    """RK4 stage state x0 + h·k (position p0 + h·dp, velocity v0 + h·dv) and where its
+    position lies in the flow at time t: (velocity, flow.locate_grain result)."""
+    v = (v0[0] + h * dv[0], v0[1] + h * dv[1], v0[2] + h * dv[2])
+    loc = locate_grain(f, re_star, p0[0] + h * dp[0], p0[1] + h * dp[1], p0[2] + h * dp[2], t)
+    return v, loc
+
+
+@njit(cache=True, error_model="numpy", _nrt=False, inline="always")
+def _stage_acceleration(f, coef, loc, cell, v):
+    """Weight and drag at a located stage point whose fluid cell is gathered."""
+    u0, u1, u2 = grain_velocity(f, loc, cell)
+    return weight_and_drag(coef, v[0], v[1], v[2], u0, u1, u2)
+
+
+@njit(cache=True, error_model="numpy", _nrt=False, inline="always")
 def _weight_drag_flight(f, coef, st, w, p, t, dt):
     """``_free_flight_body`` when weight and drag are the only forces switched on (no lift,
     Magnus, added mass, fluid acceleration, Basset or spin law: the fluid velocity alone
@@ -175,38 +191,27 @@ def _weight_drag_flight(f, coef, st, w, p, t, dt):
     if st.fresh[p] == 0:
         loc = locate_grain(f, re_star, px, py, pz, t)
         uf[0], uf[1], uf[2] = grain_velocity(f, loc, gather_at(f, loc))
-    # stage 1
-    a1x, a1y, a1z = weight_and_drag(coef, vx, vy, vz, uf[0], uf[1], uf[2])
-    # stage 2, t + dt/2
+    p0 = (px, py, pz)
+    v0 = (vx, vy, vz)
+    k1 = weight_and_drag(coef, vx, vy, vz, uf[0], uf[1], uf[2])
     h = 0.5 * dt
-    x2, y2, z2 = px + h * vx, py + h * vy, pz + h * vz
-    u2x, u2y, u2z = vx + h * a1x, vy + h * a1y, vz + h * a1z
-    loc_h = locate_grain(f, re_star, x2, y2, z2, t + h)
+    v2, loc_h = _stage_point(f, re_star, p0, v0, v0, k1, h, t + h)  # t + dt/2
     cell_h = gather_at(f, loc_h)
-    f0, f1, f2 = grain_velocity(f, loc_h, cell_h)
-    a2x, a2y, a2z = weight_and_drag(coef, u2x, u2y, u2z, f0, f1, f2)
-    # stage 3, t + dt/2: the same cell when the point has not left it
-    x3, y3, z3 = px + h * u2x, py + h * u2y, pz + h * u2z
-    u3x, u3y, u3z = vx + h * a2x, vy + h * a2y, vz + h * a2z
-    loc = locate_grain(f, re_star, x3, y3, z3, t + h)
+    k2 = _stage_acceleration(f, coef, loc_h, cell_h, v2)
+    v3, loc = _stage_point(f, re_star, p0, v0, v2, k2, h, t + h)  # t + dt/2 again
     if not same_cell(loc, loc_h):
         cell_h = gather_at(f, loc)
-    f0, f1, f2 = grain_velocity(f, loc, cell_h)
-    a3x, a3y, a3z = weight_and_drag(coef, u3x, u3y, u3z, f0, f1, f2)
-    # stage 4, t + dt
-    x4, y4, z4 = px + dt * u3x, py + dt * u3y, pz + dt * u3z
-    u4x, u4y, u4z = vx + dt * a3x, vy + dt * a3y, vz + dt * a3z
-    loc_1 = locate_grain(f, re_star, x4, y4, z4, t + dt)
+    k3 = _stage_acceleration(f, coef, loc, cell_h, v3)
+    v4, loc_1 = _stage_point(f, re_star, p0, v0, v3, k3, dt, t + dt)  # t + dt
     cell_1 = gather_at(f, loc_1)
-    f0, f1, f2 = grain_velocity(f, loc_1, cell_1)
-    a4x, a4y, a4z = weight_and_drag(coef, u4x, u4y, u4z, f0, f1, f2)
+    k4 = _stage_acceleration(f, coef, loc_1, cell_1, v4)
     c = dt / 6.0
-    px += c * (vx + 2.0 * u2x + 2.0 * u3x + u4x)
-    py += c * (vy + 2.0 * u2y + 2.0 * u3y + u4y)
-    pz += c * (vz + 2.0 * u2z + 2.0 * u3z + u4z)
-    vx += c * (a1x + 2.0 * a2x + 2.0 * a3x + a4x)
-    vy += c * (a1y + 2.0 * a2y + 2.0 * a3y + a4y)
-    vz += c * (a1z + 2.0 * a2z + 2.0 * a3z + a4z)
+    px += c * (vx + 2.0 * v2[0] + 2.0 * v3[0] + v4[0])
+    py += c * (vy + 2.0 * v2[1] + 2.0 * v3[1] + v4[1])
+    pz += c * (vz + 2.0 * v2[2] + 2.0 * v3[2] + v4[2])
+    vx += c * (k1[0] + 2.0 * k2[0] + 2.0 * k3[0] + k4[0])
+    vy += c * (k1[1] + 2.0 * k2[1] + 2.0 * k3[1] + k4[1])
+    vz += c * (k1[2] + 2.0 * k2[2] + 2.0 * k3[2] + k4[2])
     pos[0], pos[1], pos[2] = px, py, pz
     vel[0], vel[1], vel[2] = vx, vy, vz
     for i in range(3):
