@@ -252,28 +252,40 @@ def _sublayer_with_gradient(yp, y1, u, g, dudt):
 
 
 @njit(cache=True, inline="always")
+def _node_velocity(d, n0, n1, wt, i, j, k):
+    """The three stored components at node (i, j, k), linear in time (``_node3``
+    without the changes)."""
+    v = _node3(d, n0, n1, wt, i, j, k)
+    return v[0], v[1], v[2]
+
+
+@njit(cache=True, inline="always")
 def gather_cell(f, n0, n1, wt, i0, i1, j0, j1, k0, k1):
     """The 8 nodes of a located cell, each read once with its 3 components (adjacent in
-    memory) and blended in time: a tuple of 8 ``_node3`` tuples (raw stored units).
-    Points of one cell at one time share it (integrator.py reuses it between RK4 stages)."""
+    memory) and blended in time: 24 raw values, node by node in the order 000, 100,
+    010, 110, 001, 101, 011, 111. Points of one cell at one time share it
+    (integrator.py reuses it between RK4 stages)."""
     d = f.data
-    return (_node3(d, n0, n1, wt, i0, j0, k0), _node3(d, n0, n1, wt, i1, j0, k0),
-            _node3(d, n0, n1, wt, i0, j1, k0), _node3(d, n0, n1, wt, i1, j1, k0),
-            _node3(d, n0, n1, wt, i0, j0, k1), _node3(d, n0, n1, wt, i1, j0, k1),
-            _node3(d, n0, n1, wt, i0, j1, k1), _node3(d, n0, n1, wt, i1, j1, k1))
+    a = _node_velocity(d, n0, n1, wt, i0, j0, k0)
+    b = _node_velocity(d, n0, n1, wt, i1, j0, k0)
+    c = _node_velocity(d, n0, n1, wt, i0, j1, k0)
+    e = _node_velocity(d, n0, n1, wt, i1, j1, k0)
+    g = _node_velocity(d, n0, n1, wt, i0, j0, k1)
+    h = _node_velocity(d, n0, n1, wt, i1, j0, k1)
+    m = _node_velocity(d, n0, n1, wt, i0, j1, k1)
+    q = _node_velocity(d, n0, n1, wt, i1, j1, k1)
+    return (a[0], a[1], a[2], b[0], b[1], b[2], c[0], c[1], c[2], e[0], e[1], e[2],
+            g[0], g[1], g[2], h[0], h[1], h[2], m[0], m[1], m[2], q[0], q[1], q[2])
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def velocity_in_cell(f, nodes, wx, wy, wz, yp, sublayer):
+def velocity_in_cell(f, c, wx, wy, wz, yp, sublayer):
     """Velocity (u⁺, three floats) at weights (wx, wy, wz) inside a gathered cell
-    (``gather_cell``); the SPEC §3 sublayer law when ``sublayer`` (yp < y[0])."""
-    p000, p100, p010, p110, p001, p101, p011, p111 = nodes
-    u0 = _trilinear(p000[0], p100[0], p010[0], p110[0], p001[0], p101[0], p011[0], p111[0],
-                    wx, wy, wz) * f.scale[0] + f.offset[0]
-    u1 = _trilinear(p000[1], p100[1], p010[1], p110[1], p001[1], p101[1], p011[1], p111[1],
-                    wx, wy, wz) * f.scale[1] + f.offset[1]
-    u2 = _trilinear(p000[2], p100[2], p010[2], p110[2], p001[2], p101[2], p011[2], p111[2],
-                    wx, wy, wz) * f.scale[2] + f.offset[2]
+    (``gather_cell``); the SPEC §3 sublayer law when ``sublayer`` (yp < y[0]).
+    The arithmetic of ``_velocity_at_height``."""
+    u0 = _trilinear(c[0], c[3], c[6], c[9], c[12], c[15], c[18], c[21], wx, wy, wz) * f.scale[0] + f.offset[0]
+    u1 = _trilinear(c[1], c[4], c[7], c[10], c[13], c[16], c[19], c[22], wx, wy, wz) * f.scale[1] + f.offset[1]
+    u2 = _trilinear(c[2], c[5], c[8], c[11], c[14], c[17], c[20], c[23], wx, wy, wz) * f.scale[2] + f.offset[2]
     if sublayer:
         y1 = f.y[0]
         r = yp / y1
@@ -293,8 +305,28 @@ def _velocity_at_height(f, n0, n1, wt, i0, i1, wx, k0, k1, wz, yp, u):
         u[1] = 0.0
         u[2] = 0.0
         return status
-    nodes = gather_cell(f, n0, n1, wt, i0, i1, j0, j1, k0, k1)
-    u[0], u[1], u[2] = velocity_in_cell(f, nodes, wx, wy, wz, yp, sublayer)
+    d = f.data
+    # the 8 nodes read once each, 3 components together (as in _gradient_at)
+    p000 = _node3(d, n0, n1, wt, i0, j0, k0)
+    p100 = _node3(d, n0, n1, wt, i1, j0, k0)
+    p010 = _node3(d, n0, n1, wt, i0, j1, k0)
+    p110 = _node3(d, n0, n1, wt, i1, j1, k0)
+    p001 = _node3(d, n0, n1, wt, i0, j0, k1)
+    p101 = _node3(d, n0, n1, wt, i1, j0, k1)
+    p011 = _node3(d, n0, n1, wt, i0, j1, k1)
+    p111 = _node3(d, n0, n1, wt, i1, j1, k1)
+    u[0] = _trilinear(p000[0], p100[0], p010[0], p110[0], p001[0], p101[0], p011[0], p111[0],
+                      wx, wy, wz) * f.scale[0] + f.offset[0]
+    u[1] = _trilinear(p000[1], p100[1], p010[1], p110[1], p001[1], p101[1], p011[1], p111[1],
+                      wx, wy, wz) * f.scale[1] + f.offset[1]
+    u[2] = _trilinear(p000[2], p100[2], p010[2], p110[2], p001[2], p101[2], p011[2], p111[2],
+                      wx, wy, wz) * f.scale[2] + f.offset[2]
+    if sublayer:
+        y1 = f.y[0]
+        r = yp / y1
+        u[0] = yp + r * (u[0] - y1)
+        u[1] = r * u[1]
+        u[2] = r * u[2]
     return status
 
 

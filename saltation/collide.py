@@ -10,7 +10,7 @@ A hydrodynamic step of length Δt (d/u*) is done in three phases, in this order:
 2. **contacts** (this module): the grains that can touch another one during the step are
    moved again through the step in ``n_sub`` sub-steps of h = Δt/n_sub, with the fluid
    force *held* at what the free flight gave it, plus the contact forces;
-3. **bed** (integrator.bed_check_particle or packed_bed.packed_bed_check_particle).
+3. **bed** (integrator._bed_check_body or packed_bed.packed_bed_check_particle).
 
 Phase 2 is written as a correction to the free flight. Each grain's free-flight path in
 the step is the cubic Hermite interpolant H(s), s = t/Δt ∈ [0, 1], through (x₀, u₀) and

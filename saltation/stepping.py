@@ -3,7 +3,7 @@
 Each step of Δt: (1) free flight of every grain (RK4 with the fluid forces, history
 closure; integrator.free_flight_particles), (2) grain–grain contacts (collide.py: soft
 spheres sub-stepped along the free-flight paths, or binary hard-sphere impulses), (3) the
-bed (virtual bed: integrator.bed_check_particle; packed bed: packed_bed.py). The order is
+bed (virtual bed: integrator._bed_check_body, per chunk of grains; packed bed: packed_bed.py). The order is
 fixed; collide.py explains the split. Every phase is one parallel pass over the grains,
 and the wall time of each is measured around it (``time.perf_counter`` through Numba's
 object mode, ~0.6 µs per reading, four readings per step) and summed into
@@ -27,7 +27,7 @@ from numba import njit, objmode, prange
 
 from .collide import hard_contact_phase, make_bed_context, make_contact_phase, soft_contact_phase
 from .contacts import contact_model_from_case, make_contact_list, rebuild
-from .integrator import CHUNK, OK, NOT_FINITE, bed_check_particle, free_flight_particles
+from .integrator import CHUNK, OK, NOT_FINITE, _bed_check_body, free_flight_particles  # the inline bed body
 from .packed_bed import make_packed_bed, packed_bed_check_particle
 
 CONTACTS_OFF, CONTACTS_SOFT, CONTACTS_HARD = 0, 1, 2
@@ -54,25 +54,30 @@ def _free_flight(f, coef, st, w, hc, t, dt):
         free_flight_particles(f, coef, st, w, hc, c * CHUNK, min(n, (c + 1) * CHUNK), t, dt)
 
 
+@njit(cache=True, error_model="numpy", _nrt=False)
+def _bed_range(st, w, lo, hi, t, dt, step, bed, seed, bed_model, pb, last_contact, top, skip, use_skip):
+    """The bed for grains lo..hi-1 (one call per chunk: integrator.CHUNK)."""
+    for p in range(lo, hi):
+        if st.status[p] != OK:
+            continue
+        if not (use_skip and skip[p] != 0):
+            if bed_model == BED_PACKED:
+                packed_bed_check_particle(st, w, p, t, dt, step, bed, pb, last_contact)
+            else:
+                _bed_check_body(st, w, p, t, dt, bed, seed)
+        if st.pos[p, 1] > top:
+            st.above_top[p] += 1
+
+
 @njit(cache=True, parallel=True)
 def _bed_pass(st, w, t, dt, step, bed, seed, bed_model, pb, last_contact, top, skip):
     """The bed for every grain not in ``skip`` (grains whose bed contact the soft contact
     phase resolved; ``skip`` empty: none)."""
-    above_top, pos, status = st.above_top, st.pos, st.status  # writes in a prange body: not through the tuple
-    use_skip = skip.shape[0] == pos.shape[0]
-    for p in prange(pos.shape[0]):
-        if status[p] != OK:
-            continue
-        if use_skip and skip[p] != 0:
-            if pos[p, 1] > top:
-                above_top[p] += 1
-            continue
-        if bed_model == BED_PACKED:
-            packed_bed_check_particle(st, w, p, t, dt, step, bed, pb, last_contact)
-        else:
-            bed_check_particle(st, w, p, t, dt, bed, seed)
-        if pos[p, 1] > top:
-            above_top[p] += 1
+    n = st.pos.shape[0]
+    use_skip = skip.shape[0] == n
+    for c in prange((n + CHUNK - 1) // CHUNK):
+        _bed_range(st, w, c * CHUNK, min(n, (c + 1) * CHUNK), t, dt, step, bed, seed, bed_model, pb,
+                   last_contact, top, skip, use_skip)
 
 
 @njit(cache=True)
