@@ -170,7 +170,7 @@ def test_spin_key_reaches_the_kernel(tmp_path):
         assert sim.coef[ON_SPIN] == float(value)
 
 
-def test_weight_and_drag_fast_path_matches_the_general_body_bit_for_bit():
+def test_weight_and_drag_fast_path_matches_the_general_body_to_round_off():
     """With weight and drag the only forces the integrator takes its scalar fast path
     (one gathered fluid cell per time level, reused by the stages in the same cell);
     lift switched on with C_L = 0 adds exactly nothing but forces the general body.
