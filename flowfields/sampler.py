@@ -282,7 +282,7 @@ def gather_cell(f, n0, n1, wt, i0, i1, j0, j1, k0, k1):
 def velocity_in_cell(f, c, wx, wy, wz, yp, sublayer):
     """Velocity (u⁺, three floats) at weights (wx, wy, wz) inside a gathered cell
     (``gather_cell``); the SPEC §3 sublayer law when ``sublayer`` (yp < y[0]).
-    The arithmetic of ``_velocity_at_height``."""
+    ``_velocity_at_height`` goes through it too."""
     u0 = _trilinear(c[0], c[3], c[6], c[9], c[12], c[15], c[18], c[21], wx, wy, wz) * f.scale[0] + f.offset[0]
     u1 = _trilinear(c[1], c[4], c[7], c[10], c[13], c[16], c[19], c[22], wx, wy, wz) * f.scale[1] + f.offset[1]
     u2 = _trilinear(c[2], c[5], c[8], c[11], c[14], c[17], c[20], c[23], wx, wy, wz) * f.scale[2] + f.offset[2]
@@ -305,28 +305,8 @@ def _velocity_at_height(f, n0, n1, wt, i0, i1, wx, k0, k1, wz, yp, u):
         u[1] = 0.0
         u[2] = 0.0
         return status
-    d = f.data
-    # the 8 nodes read once each, 3 components together (as in _gradient_at)
-    p000 = _node3(d, n0, n1, wt, i0, j0, k0)
-    p100 = _node3(d, n0, n1, wt, i1, j0, k0)
-    p010 = _node3(d, n0, n1, wt, i0, j1, k0)
-    p110 = _node3(d, n0, n1, wt, i1, j1, k0)
-    p001 = _node3(d, n0, n1, wt, i0, j0, k1)
-    p101 = _node3(d, n0, n1, wt, i1, j0, k1)
-    p011 = _node3(d, n0, n1, wt, i0, j1, k1)
-    p111 = _node3(d, n0, n1, wt, i1, j1, k1)
-    u[0] = _trilinear(p000[0], p100[0], p010[0], p110[0], p001[0], p101[0], p011[0], p111[0],
-                      wx, wy, wz) * f.scale[0] + f.offset[0]
-    u[1] = _trilinear(p000[1], p100[1], p010[1], p110[1], p001[1], p101[1], p011[1], p111[1],
-                      wx, wy, wz) * f.scale[1] + f.offset[1]
-    u[2] = _trilinear(p000[2], p100[2], p010[2], p110[2], p001[2], p101[2], p011[2], p111[2],
-                      wx, wy, wz) * f.scale[2] + f.offset[2]
-    if sublayer:
-        y1 = f.y[0]
-        r = yp / y1
-        u[0] = yp + r * (u[0] - y1)
-        u[1] = r * u[1]
-        u[2] = r * u[2]
+    cell = gather_cell(f, n0, n1, wt, i0, i1, j0, j1, k0, k1)
+    u[0], u[1], u[2] = velocity_in_cell(f, cell, wx, wy, wz, yp, sublayer)
     return status
 
 

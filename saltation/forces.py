@@ -153,14 +153,21 @@ def drag_factor(slip_speed, re_star):
 
 
 # ---------------------------------------------------------------- the terms
+@njit(cache=True, _nrt=False, inline="always")
+def weight_components(coef):
+    """(α/τ*) sin θ and (α/τ*) cos θ: a_sw = (α/τ*)(sin θ, -cos θ, 0)."""
+    g = coef[ALPHA] / coef[TAU_STAR]
+    return g * coef[SIN_SLOPE], g * coef[COS_SLOPE]
+
+
 @njit(cache=True, _nrt=False)
 def _add_weight(coef, out):
     # a_sw = (α/τ*)(sin θ, -cos θ, 0)
     if coef[ON_WEIGHT] == 0.0:
         return
-    g = coef[ALPHA] / coef[TAU_STAR]
-    out[0] += g * coef[SIN_SLOPE]
-    out[1] -= g * coef[COS_SLOPE]
+    gx, gy = weight_components(coef)
+    out[0] += gx
+    out[1] -= gy
 
 
 @njit(cache=True, _nrt=False, inline="always")
@@ -192,9 +199,9 @@ def weight_and_drag(coef, up0, up1, up2, uf0, uf1, uf2):
     a1 = 0.0
     a2 = 0.0
     if coef[ON_WEIGHT] != 0.0:
-        g = coef[ALPHA] / coef[TAU_STAR]
-        a0 += g * coef[SIN_SLOPE]
-        a1 -= g * coef[COS_SLOPE]
+        gx, gy = weight_components(coef)
+        a0 += gx
+        a1 -= gy
     if coef[ON_DRAG] != 0.0:
         r0 = up0 - uf0
         r1 = up1 - uf1
