@@ -8,8 +8,10 @@ the free flight / bed / contacts split, and peak memory per grain (issue 4, "Sca
 
 Two series, each point in its own process (so peak RSS belongs to that point alone):
 
-(a) fixed concentration ``--fixed-c`` (default 1.03 %): the domain grows with N (the
-    paper's aspect ratio, [0.176, 0.088, 0.028] m scaled);
+(a) fixed concentration ``--fixed-c`` (default 1.03 %): the bed area grows with N, the
+    height stays the paper's 0.088 m (Lx : Lz kept at the paper's 0.176 : 0.028), so every
+    point has the same grains per bed area and the same starting layer: the same
+    physics per grain, only more of it (a weak-scaling test of linearity in N);
 (b) fixed domain (the paper's [0.176, 0.088, 0.028] m, the shipped LES tiled over it):
     N = 1 000 … 99 000 are the paper's concentrations 0.04 … 3.94 %; 125 000 is 5 %, the
     one-way-coupling limit the case files accept.
@@ -31,8 +33,8 @@ on those and scatters the result back (collide.py, "Memory layout"), so the cost
 grain-sub-step should not grow with N. Column "ns/g-sub": contact-phase wall time per
 grain-sub-step done (it also carries the phase's O(N) passes: reach, list rebuild,
 engagement test, gather). The sub-stepped share depends on how far the grains have
-spread from their initial layer (points above 30 000 grains get a third of the spin-up),
-so compare "ns/g-sub" across N rather than "contacts".
+spread from their initial layer; every point gets the same spin-up and timed steps, so
+in series (a) the sub-stepped share should come out the same at every N.
 
 Prints a table and one JSON object (also written to ``--json``). The machine may be
 shared: the 1-minute load average is printed with every point, and ``cpu_per_step_ms``
@@ -42,6 +44,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import resource
 import subprocess
@@ -66,6 +69,15 @@ def case_tables(n, concentration=None, domain=None, contacts="soft", bed="virtua
         "run": run,
         "output": {"tracks": False, "vtk": False},
     }
+
+
+def bed_area_domain(n, concentration, d=0.69e-3):
+    """[Lx, Lz, H] (m) holding n grains at the volume fraction: the paper's height H, its
+    Lx : Lz, the bed area scaled (series (a))."""
+    lx0, lz0, h = PAPER_DOMAIN
+    area = n * math.pi / 6.0 * d ** 3 / (concentration * h)
+    scale = math.sqrt(area / (lx0 * lz0))
+    return (scale * lx0, scale * lz0, h)
 
 
 def one_point(args) -> dict:
@@ -94,12 +106,8 @@ def one_point(args) -> dict:
     del sim, st, ws
     base_kb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
 
-    domain = None if args.concentration is not None else PAPER_DOMAIN
-    tables = case_tables(args.n, concentration=args.concentration, domain=domain, contacts=args.contacts,
-                         bed=args.bed, threads=args.threads)
-    if args.concentration is not None:
-        # both n and C given: the paper's box scaled to hold N grains at C
-        tables["run"]["domain"] = list(PAPER_DOMAIN)
+    domain = PAPER_DOMAIN if args.concentration is None else bed_area_domain(args.n, args.concentration)
+    tables = case_tables(args.n, domain=domain, contacts=args.contacts, bed=args.bed, threads=args.threads)
     t0 = time.perf_counter()
     sim, ds, st, ws = build(tables)
     setup_s = time.perf_counter() - t0
@@ -149,13 +157,14 @@ def one_point(args) -> dict:
         out["contacts_ns_per_grain_substep"] = 1e9 * pc / float(d[3]) if d[3] else None
         out["collisions_per_particle"] = float(stepper.cl.collisions.sum()) / sim.n
         out["missed_contacts"] = int(d[4])
+        out["blocks_per_step"] = float(d[5]) / timed  # collide.py, "Blocks"
+        out["phases_redone_unblocked"] = int(d[6])
     return out
 
 
 def run_point(n, concentration, args) -> dict:
     cmd = [sys.executable, __file__, "--one", str(n), "--threads", str(args.threads), "--contacts", args.contacts,
-           "--bed", args.bed, "--spinup", str(args.spinup if n <= 30000 else max(10, args.spinup // 3)),
-           "--steps", str(args.steps if n <= 30000 else max(3, args.steps // 4))]
+           "--bed", args.bed, "--spinup", str(args.spinup), "--steps", str(args.steps)]
     if concentration is not None:
         cmd += ["--concentration", repr(concentration)]
     res = subprocess.run(cmd, capture_output=True, text=True)
@@ -199,7 +208,7 @@ def main():
         return
     t0 = time.perf_counter()
     fixed_c = [run_point(n, args.fixed_c, args) for n in args.n_fixed_c]
-    table(fixed_c, f"(a) fixed concentration {100 * args.fixed_c:.2f} % (domain grows), contacts {args.contacts}, "
+    table(fixed_c, f"(a) fixed concentration {100 * args.fixed_c:.2f} % (bed area grows), contacts {args.contacts}, "
                    f"bed {args.bed}, {args.threads} thread(s); times per particle-step in us")
     fixed_d = [run_point(n, None, args) for n in args.n_fixed_domain]
     table(fixed_d, "(b) fixed domain [0.176, 0.088, 0.028] m (concentration grows)")

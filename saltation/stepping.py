@@ -246,6 +246,10 @@ class Stepper:
                                 "(then checked: missed_contacts = pairs found in contact but not listed)",
                 "wakes": int(ph.counters[2]),
                 "substepped_grain_substeps": int(ph.counters[3]),
+                "blocks": int(ph.counters[5]),
+                "phases_redone_unblocked": int(ph.counters[6]),
+                "blocks_are": "groups of grains sub-stepped together, out of touch with the other blocks "
+                              "(collide.py, \"Blocks\"); a phase is redone as one block when that fails",
             }
         return out
 
@@ -293,7 +297,9 @@ class Stepper:
             skin = float(arrays["cl_skin"][0])
             cl = cl._replace(cutoff=1.0 + skin, skin=skin)
         self.cl = cl
-        for name in ("contact_substeps", "overlap_sum", "counters", "bed_overlap_max"):
+        for name in ("contact_substeps", "overlap_sum", "bed_overlap_max"):
             getattr(self.ph, name)[...] = arrays["ph_" + name]
+        saved = arrays["ph_counters"]  # checkpoints before the block counters have 5
+        self.ph.counters[:saved.shape[0]] = saved
         for name in BED_CONTACT_STATE:
             getattr(self.bc, name)[...] = arrays["bc_" + name]
