@@ -5,30 +5,11 @@ another block (the phase is then redone as one block)."""
 import numpy as np
 
 from saltation import contacts as K
-from saltation.collide import make_bed_context, make_contact_phase, soft_contact_phase
-from saltation.integrator import make_state, make_workspace
-from saltation.packed_bed import make_packed_bed
+from test_collide_layout import run_contact_phase
 
 
-def _run(pos0, vel0, block_members, box, skin, steps, dt, n_sub=128):
-    """Straight-line free flight plus the contact phase, ``steps`` steps; returns the state,
-    the list and the phase counters."""
-    n = len(pos0)
-    model = K.make_contact_model(5e5, 0.9, 0.3)
-    st = make_state(pos0, vel0, np.zeros((n, 3)), 0.0, 4)
-    ws = make_workspace(n)
-    cl = K.make_contact_list(st.pos, box, (True, False, True), 1.0, skin)
-    ph = make_contact_phase(n, block_members)
-    bc = make_bed_context(n, False, make_packed_bed(3.0, 3.0), 0.65, 0.3, 0.5, model.kn, model.kt, 0,
-                          np.full(n, -2, np.int64))
-    for s in range(steps):
-        ws.x0[:, 0:3] = st.pos
-        ws.x0[:, 3:6] = st.vel
-        ws.x0[:, 6:9] = st.spin
-        st.pos[:] += dt * st.vel
-        cl = soft_contact_phase(st, ws.x0, model, cl, ph, bc, s * dt, s, dt, n_sub)
-        assert (ph.loc == -1).all()
-    return st, cl, ph
+def _run(pos0, vel0, block_members, box, skin, steps, dt):
+    return run_contact_phase(pos0, vel0, steps, dt, 128, box, skin, 0.3, 0.3, block_members)
 
 
 def _same(a, b):

@@ -9,15 +9,17 @@ from saltation.integrator import make_state, make_workspace
 from saltation.packed_bed import make_packed_bed
 
 
-def _knock_on(pos0, vel0, steps=3, dt=0.02, n_sub=128):
-    """Grain 1 knocks grain 0 into grain 2 (out of reach of the undeflected paths)."""
+def run_contact_phase(pos0, vel0, steps=3, dt=0.02, n_sub=128, box=(12.0, 8.0, 12.0), skin=0.6, friction=0.2,
+                      bed_friction=0.1, block_members=None):
+    """Straight-line free flight plus the contact phase for ``steps`` steps (virtual bed);
+    returns the state, the list and the phase."""
     n = len(pos0)
-    model = K.make_contact_model(5e5, 0.9, 0.2)
+    model = K.make_contact_model(5e5, 0.9, friction)
     st = make_state(pos0, vel0, np.zeros((n, 3)), 0.0, 4)
     ws = make_workspace(n)
-    cl = K.make_contact_list(st.pos, (12.0, 8.0, 12.0), (True, False, True), 1.0, 0.6)
-    ph = make_contact_phase(n)
-    bc = make_bed_context(n, False, make_packed_bed(3.0, 3.0), 0.65, 0.1, 0.5, model.kn, model.kt, 0,
+    cl = K.make_contact_list(st.pos, box, (True, False, True), 1.0, skin)
+    ph = make_contact_phase(n) if block_members is None else make_contact_phase(n, block_members)
+    bc = make_bed_context(n, False, make_packed_bed(3.0, 3.0), 0.65, bed_friction, 0.5, model.kn, model.kt, 0,
                           np.full(n, -2, np.int64))
     for s in range(steps):
         ws.x0[:, 0:3] = st.pos
@@ -35,8 +37,8 @@ def test_woken_grain_brings_its_neighbours_and_a_bystander_changes_nothing():
     # grain 3: a list neighbour of grain 2 only (1.3 d to its side), never touched
     pos4 = np.vstack([pos3, [[6.1, 3.0, 6.3]]])
     vel4 = np.vstack([vel3, [[0.0, 0.0, 0.0]]])
-    st3, cl3, ph3 = _knock_on(pos3, vel3)
-    st4, cl4, ph4 = _knock_on(pos4, vel4)
+    st3, cl3, ph3 = run_contact_phase(pos3, vel3)
+    st4, cl4, ph4 = run_contact_phase(pos4, vel4)
     assert 3 in cl4.nbr[2, :cl4.nbr_count[2]] and 3 not in cl4.nbr[0, :cl4.nbr_count[0]]
     assert ph3.counters[2] >= 1 and ph4.counters[2] >= 1  # grain 2 was woken
     assert st3.vel[2, 0] > 1.0
