@@ -159,6 +159,7 @@ def one_point(args) -> dict:
         out["missed_contacts"] = int(d[4])
         out["blocks_per_step"] = float(d[5]) / timed  # collide.py, "Blocks"
         out["phases_redone_unblocked"] = int(d[6])
+        out["phases_redone_merged"] = int(d[7])
     return out
 
 

@@ -120,22 +120,34 @@ step, and each block runs all its sub-steps while it sits in cache:
 
 - two members are put in one group when their free-flight paths come closer than
   d + 2σ during the step (``_path_gap``: |r(s)| ≥ |r₀| − |Δx_i − Δx_j| − b_i − b_j; the
-  same bound as the engagement test) or they touch now; σ = BLOCK_SLACK = 0.25 d when
+  same bound as the engagement test) or they touch now; σ = BLOCK_SLACK = 0.2 d when
   one of the two may touch something on its free-flight path (start ≤ 1), else
-  QUIET_SLACK = 0.1 d. The groups are the connected components (union–find over every
-  member's list pairs), numbered in cell order; consecutive groups fill a block of up
-  to BLOCK_MEMBERS = 256 members (~1 kB each: a block fits the 1 MB L2 cache);
+  QUIET_SLACK = 0.05 d (``ph.block_slack``). The groups are the connected components
+  (union–find over every member's list pairs), numbered in cell order; consecutive
+  groups fill a block of up to BLOCK_MEMBERS = 256 members (~1 kB each: a block fits
+  the 1 MB L2 cache);
 - a block is sub-stepped on its own (``_run_block``): a neighbour in another block is
   treated as out of touch; grains woken on deflected paths, and the neighbours they
   bring in, belong to the block that woke them;
-- afterwards ``_certified`` checks that no pair across blocks can have touched: for
+- afterwards ``_conflicts`` checks that no pair across blocks can have touched: for
   each such pair in an active member's row, path gap − |δx|ₘₐₓ,ᵢ − |δx|ₘₐₓ,ⱼ > d (the
   largest deviations the sub-steps produced). Then the blocked result *is* the result
   of sweeping everything at once, bit for bit (every grain's arithmetic and sums are
-  the same; a pair out of touch adds nothing in either). When the check fails (a grain
-  deflected by more than its slack toward another block), the phase is redone as one
-  block from the untouched grain arrays (``_release`` undoes the jump records written
-  meanwhile); ``counters[5]`` counts blocks run, ``counters[6]`` phases redone.
+  the same; a pair out of touch adds nothing in either). Every pair that fails the
+  check (a grain deflected by more than its slack toward another block) has its two
+  groups joined, and the phase is redone, still in blocks, from the untouched grain
+  arrays (``_release`` undoes the jump records written meanwhile); after MERGED_PASSES
+  = 3 such passes, as one block. ``counters[5]`` counts blocks run, ``counters[7]``
+  phases redone with joined groups, ``counters[6]`` phases redone as one block.
+
+The slacks trade group size against redone passes. The near-bed layer is dense (at
+1 % solids a quarter of the grains are sub-stepped in every step), and larger slacks
+join it into one giant group that no longer fits the cache; smaller ones let bed
+rebounds on the tilted virtual bed (deviations ~0.2 d) cross into other blocks.
+Measured at 50 000 grains, 1 % (``benchmarks/bench_scaling.py`` set-up, 40 steps):
+σ = (0.25, 0.1) d: a giant group, 659 ns per grain-sub-step, no pass redone;
+(0.1, 0.1): 463 ns, 13 passes redone; (0.05, 0.05): 652 ns, 61 redone;
+(0.2, 0.05): 328 ns, none redone (5 000 grains: ~300 ns).
 
 Statistics (per grain, race-free): ``cl.collisions`` (contacts begun), ``cl.max_overlap``,
 and here ``contact_substeps`` (sub-steps spent in each contact, summed) and
@@ -159,9 +171,10 @@ from .rng import uniform2
 __all__ = ["ContactPhase", "SubstepSet", "BedContext", "make_contact_phase", "make_bed_context", "soft_contact_phase",
            "hard_contact_phase"]
 
-BLOCK_SLACK = 0.25  # d: deviation from free flight a block allows each grain ("Blocks")
-QUIET_SLACK = 0.1  # d: the same for pairs of grains that cannot touch on their free-flight paths
+BLOCK_SLACK = 0.2  # d: deviation from free flight a block allows each grain ("Blocks")
+QUIET_SLACK = 0.05  # d: the same for pairs of grains that cannot touch on their free-flight paths
 BLOCK_MEMBERS = 256  # members per block (~1 kB each: a block stays in a 1 MB L2 cache)
+MERGED_PASSES = 3  # passes redone with the conflicting groups joined before one that is a single block
 BED_SLOTS = 4  # bed spheres one grain can touch at once (3 in a hollow of the packed layer)
 FREE = -1  # an empty bed-contact slot
 VIRTUAL = -2  # a slot holding a virtual bed grain
@@ -210,16 +223,19 @@ class ContactPhase(NamedTuple):
     bed_overlap_max: np.ndarray  # (N,) largest overlap with a bed sphere (d)
     contact_substeps: np.ndarray  # (N,) int64 Σ sub-steps in contact (statistics)
     overlap_sum: np.ndarray  # (N,) float64 Σ overlap over those sub-steps (d)
-    counters: np.ndarray  # (7,) int64: list rebuilds, overruns, wakes, sub-stepped grain-steps, missed,
-    #                       blocks run, phases redone as one block ("Blocks")
+    counters: np.ndarray  # (8,) int64: list rebuilds, overruns, wakes, sub-stepped grain-steps, missed,
+    #                       blocks run, phases redone as one block, phases redone in merged blocks ("Blocks")
     block_members: np.ndarray  # (1,) int64 most members per block (BLOCK_MEMBERS; "Blocks")
+    block_slack: np.ndarray  # (2,) float64 σ (d) of candidates and of the other members (BLOCK_SLACK, QUIET_SLACK)
 
 
-def make_contact_phase(n: int, block_members: int = BLOCK_MEMBERS) -> ContactPhase:
+def make_contact_phase(n: int, block_members: int = BLOCK_MEMBERS, block_slack=(BLOCK_SLACK, QUIET_SLACK)
+                       ) -> ContactPhase:
     return ContactPhase(
         np.zeros(n, np.uint8), np.zeros(n, np.int64), np.zeros(1, np.int64), np.zeros(n), np.zeros((n, 3)),
         np.zeros(n), np.zeros(n), np.zeros(n), np.full(n, -1, np.int64), np.zeros(n), np.zeros(n, np.int64),
-        np.zeros(n), np.zeros(7, np.int64), np.array([block_members], np.int64),
+        np.zeros(n), np.zeros(8, np.int64), np.array([block_members], np.int64),
+        np.array([float(block_slack[0]), float(block_slack[1])]),
     )
 
 
@@ -377,7 +393,7 @@ def _grain_force(a, cs, model, box, per, s, dt, h, update, blk):
     gran/hooke/history arithmetic, mirrored exactly so both grains of a pair compute
     negated vectors); h: the sub-step the tangential spring advances by. box, per: the
     contact grid's lengths and periodic flags. A neighbour in another block than ``blk``
-    is not looked at: it is out of touch for the whole step, which _certified checks
+    is not looked at: it is out of touch for the whole step, which _conflicts checks
     afterwards ("Blocks")."""
     lx, ly, lz = box[0], box[1], box[2]
     px, py, pz = per[0], per[1], per[2]
@@ -807,6 +823,12 @@ def _margins(x0w, pos, reach, margin):
 
 
 
+@njit(cache=True, inline="always")
+def _block_member(t, lo, hi, app):
+    """The t-th member of a block: lo..hi-1 from the gather, then app.. (appended while it ran)."""
+    return lo + t if lo + t < hi else app + (lo + t - hi)
+
+
 @njit(cache=True, error_model="numpy", _nrt=False)
 def _forces(cs, st, bc, model, box, per, s, dt, h, update, lo, hi, app, blk):
     """Forces on every active member of block blk (members lo..hi-1 and app..n-1) at s;
@@ -814,7 +836,7 @@ def _forces(cs, st, bc, model, box, per, s, dt, h, update, lo, hi, app, blk):
     woke = 0
     active = cs.active
     for t in range(hi - lo + cs.n[0] - app):
-        a = lo + t if lo + t < hi else app + (lo + t - hi)
+        a = _block_member(t, lo, hi, app)
         if active[a] == 0:
             continue
         _grain_force(a, cs, model, box, per, s, dt, h, update, blk)
@@ -831,7 +853,7 @@ def _kick_drift_forces(cs, st, bc, model, box, per, s_next, dt, h, lo, hi, app, 
     inv_i = 1.0 / model.inertia
     active, dev, ft, dev_max = cs.active, cs.dev, cs.ft, cs.dev_max
     for t in range(hi - lo + cs.n[0] - app):
-        a = lo + t if lo + t < hi else app + (lo + t - hi)
+        a = _block_member(t, lo, hi, app)
         if active[a] == 0:
             continue
         for c in range(3):
@@ -852,7 +874,7 @@ def _kick(cs, model, h, lo, hi, app):
     inv_i = 1.0 / model.inertia
     active, dev, ft = cs.active, cs.dev, cs.ft
     for t in range(hi - lo + cs.n[0] - app):
-        a = lo + t if lo + t < hi else app + (lo + t - hi)
+        a = _block_member(t, lo, hi, app)
         if active[a] == 0:
             continue
         for c in range(3):
@@ -981,17 +1003,23 @@ def _root(parent, p):
 
 
 @njit(cache=True)
-def _blocks(x0w, pos, vel, cl, ph, gid, dt, reach_limit, quiet_limit, cap):
+def _blocks(x0w, pos, vel, cl, ph, gid, dt, d, cap, forced):
     """Blocks of the members gid[0..m-1] (a grain id each, in cell order; ph.loc[g] their
     index): groups that stay out of touch with each other on paths deviating by less than
-    BLOCK_SLACK from free flight are the connected components of the pairs that come
-    closer than ``reach_limit`` = d + 2 BLOCK_SLACK (or touch now); consecutive groups fill
-    a block up to ``cap`` members. Returns each member's new index, its block, and the
-    blocks' first members (n_blocks + 1)."""
+    σ from free flight are the connected components of the pairs that come closer than
+    d + 2σ (or touch now), joined further by the union–find forest ``forced`` over the
+    members (pairs that met across blocks in an earlier pass; empty: none); consecutive
+    groups fill a block up to ``cap`` members. Returns each member's new index, its block,
+    and the blocks' first members (n_blocks + 1)."""
     m = gid.shape[0]
     box, per = cl.grid.box, cl.grid.periodic
     nbr, nbr_count, touch = cl.nbr, cl.nbr_count, cl.touch
+    reach_limit = d * (1.0 + 2.0 * ph.block_slack[0])
+    quiet_limit = d * (1.0 + 2.0 * ph.block_slack[1])
     parent = np.arange(m)
+    if forced.shape[0] == m:
+        for p in range(m):
+            parent[p] = _root(forced, p)  # roots are the least index there too
     for p in range(m):
         # every member's list pairs with other members: a neighbour that is woken gets its
         # row, and its pairs are looked at, only later
@@ -1043,11 +1071,13 @@ def _blocks(x0w, pos, vel, cl, ph, gid, dt, reach_limit, quiet_limit, cap):
 
 
 @njit(cache=True)
-def _gather(x0w, st, cl, bc, ph, dt, d, blocked):
+def _gather(x0w, st, cl, bc, ph, dt, d, blocked, forced):
     """The SubstepSet of this phase: the candidates (start ≤ 1) with their rows and their
     list neighbours, numbered in the list's cell order, block by block ("Blocks"; one
-    block when not ``blocked``). Returns it, the candidates (member indices) by block and
-    then by start, each block's first candidate (n_blocks + 1) and first member."""
+    block when not ``blocked``; groups joined by ``forced``, see _blocks). Returns it, the
+    candidates (member indices) by block and then by start, each block's first candidate
+    (n_blocks + 1) and first member, and each member's index in cell order → its index in
+    the set."""
     n = x0w.shape[0]
     loc, start, nbr, nbr_count = ph.loc, ph.start, cl.nbr, cl.nbr_count
     members = 0
@@ -1076,8 +1106,7 @@ def _gather(x0w, st, cl, bc, ph, dt, d, blocked):
             gid[p] = g
             p += 1
     if blocked:
-        new, blk, mstart = _blocks(x0w, st.pos, st.vel, cl, ph, gid, dt, d * (1.0 + 2.0 * BLOCK_SLACK),
-                                     d * (1.0 + 2.0 * QUIET_SLACK), ph.block_members[0])
+        new, blk, mstart = _blocks(x0w, st.pos, st.vel, cl, ph, gid, dt, d, ph.block_members[0], forced)
     else:
         new = np.arange(members)
         blk = np.zeros(members, np.int64)
@@ -1115,7 +1144,7 @@ def _gather(x0w, st, cl, bc, ph, dt, d, blocked):
         b = cs.block[by_start[t]]
         out[fill[b]] = by_start[t]
         fill[b] += 1
-    return cs, out, cstart, mstart
+    return cs, out, cstart, mstart, new
 
 
 @njit(cache=True)
@@ -1153,7 +1182,7 @@ def _wake_up(cs, x0w, st, bc, model, cl, ph, s, dt, h, update, lo, hi, app, blk)
         n_scan = hi - lo + cs.n[0] - app if first_round else q_hi - q_lo
         for t in range(n_scan):
             if first_round:
-                a = lo + t if lo + t < hi else app + (lo + t - hi)
+                a = _block_member(t, lo, hi, app)
             else:
                 a = cs.queue[q_lo + t]
             if cs.active[a] == 0 or cs.wake[a] == 0:
@@ -1215,12 +1244,43 @@ def _run_block(cs, cand, c0, c1, lo, hi, blk, x0w, st, bc, model, cl, ph, dt, n_
     return cs
 
 
+@njit(cache=True, inline="always")
+def _join_groups(forced, p, q):
+    rp = _root(forced, p)
+    rq = _root(forced, q)
+    if rp < rq:
+        forced[rq] = rp
+    elif rq < rp:
+        forced[rp] = rq
+
+
+@njit(cache=True, inline="always")
+def _group_of(cs, a, cell_of, forced, mstart):
+    """A member (index in cell order) of member a's group; a member appended while its
+    block ran (its group is not known) first joins every group of its block."""
+    m0 = cell_of.shape[0]
+    if a < m0:
+        return cell_of[a]
+    bl = cs.block[a]
+    p = cell_of[mstart[bl]]
+    for t in range(mstart[bl] + 1, mstart[bl + 1]):
+        _join_groups(forced, p, cell_of[t])
+    return p
+
+
 @njit(cache=True)
-def _certified(cs, dt, d, box, per):
-    """True when no pair of members in different blocks can have touched: for every such
-    pair in an active member's row, the free-flight paths stay apart by more than d plus
-    the largest deviations the two had ("Blocks")."""
+def _conflicts(cs, dt, d, box, per, forced, new, mstart):
+    """The pairs of members in different blocks that may have touched: for every such pair
+    in an active member's row, the free-flight paths come closer than d plus the largest
+    deviations the two had ("Blocks"). Each such pair's groups are joined in ``forced``
+    (an appended member, whose group is not known, joins its whole block). Returns their
+    number: 0 certifies the pass."""
+    m0 = mstart[mstart.shape[0] - 1]
+    cell_of = np.empty(m0, np.int64)  # set index → index in cell order (the gather's)
+    for p in range(m0):
+        cell_of[new[p]] = p
     path = cs.path
+    n_bad = 0
     for a in range(cs.n[0]):
         if cs.active[a] == 0:
             continue
@@ -1232,14 +1292,18 @@ def _certified(cs, dt, d, box, per):
             db = math.sqrt(cs.dev_max[b]) if cs.active[b] != 0 else 0.0
             gap = _path_gap(path[a, 0:3], path[a, 9:12], path[a, 3:6], path[a, 12:15], path[b, 0:3],
                             path[b, 9:12], path[b, 3:6], path[b, 12:15], box, per, dt)
-            if gap - da - db <= d * (1.0 + 1e-9):
-                return False
-    return True
+            if gap - da - db > d * (1.0 + 1e-9):
+                continue
+            n_bad += 1
+            if forced.shape[0] != m0:
+                continue  # no forest to join in (the caller redoes the phase as one block)
+            _join_groups(forced, _group_of(cs, a, cell_of, forced, mstart), _group_of(cs, b, cell_of, forced, mstart))
+    return n_bad
 
 
 @njit(cache=True)
 def _release(cs, st, ph):
-    """Undo a blocked pass that failed _certified: the grain arrays were not written, except
+    """Undo a blocked pass that failed _conflicts: the grain arrays were not written, except
     the jump records of bed impacts and the set's membership marks."""
     for a in range(cs.n[0]):
         g = cs.gid[a]
@@ -1362,21 +1426,29 @@ def soft_contact_phase(st, x0w, model, cl, ph, bc, t0, step, dt, n_sub):
     d = model.diameter
     box, per = cl.grid.box, cl.grid.periodic
     wakes0, done0 = ph.counters[2], ph.counters[3]
-    cs, cand, cstart, mstart = _gather(x0w, st, cl, bc, ph, dt, d, True)
-    n_blocks = mstart.shape[0] - 1
-    for b in range(n_blocks):
-        if cstart[b + 1] > cstart[b]:
-            cs = _run_block(cs, cand, cstart[b], cstart[b + 1], mstart[b], mstart[b + 1], b, x0w, st, bc, model,
-                            cl, ph, dt, n_sub)
-    ph.counters[5] += n_blocks
-    if n_blocks > 1 and not _certified(cs, dt, d, box, per):
-        # a deflected grain came near one of another block: redo the phase as one block
-        ph.counters[6] += 1
+    forced = np.empty(0, np.int64)  # groups joined after a failed pass (_conflicts)
+    passes = 0
+    while True:
+        cs, cand, cstart, mstart, new = _gather(x0w, st, cl, bc, ph, dt, d, passes <= MERGED_PASSES, forced)
+        n_blocks = mstart.shape[0] - 1
+        for b in range(n_blocks):
+            if cstart[b + 1] > cstart[b]:
+                cs = _run_block(cs, cand, cstart[b], cstart[b + 1], mstart[b], mstart[b + 1], b, x0w, st, bc,
+                                model, cl, ph, dt, n_sub)
+        ph.counters[5] += n_blocks
+        if n_blocks == 1:
+            break
+        if forced.shape[0] == 0:
+            forced = np.arange(mstart[n_blocks])  # the same members in every pass
+        if _conflicts(cs, dt, d, box, per, forced, new, mstart) == 0:
+            break
+        # a deflected grain came near one of another block: redo the phase with the two
+        # groups joined (after MERGED_PASSES such passes, as one block)
+        passes += 1
+        ph.counters[6 if passes > MERGED_PASSES else 7] += 1
         _release(cs, st, ph)
         ph.counters[2] = wakes0
         ph.counters[3] = done0
-        cs, cand, cstart, mstart = _gather(x0w, st, cl, bc, ph, dt, d, False)
-        cs = _run_block(cs, cand, 0, cand.shape[0], 0, cs.n[0], 0, x0w, st, bc, model, cl, ph, dt, n_sub)
     over = _scatter(cs, st, cl, bc, ph, skin_half)
     if over > 0:
         # a grain may have left the list's reach: look for pairs in contact now that the

@@ -247,9 +247,12 @@ class Stepper:
                 "wakes": int(ph.counters[2]),
                 "substepped_grain_substeps": int(ph.counters[3]),
                 "blocks": int(ph.counters[5]),
+                "phases_redone_merged": int(ph.counters[7]),
                 "phases_redone_unblocked": int(ph.counters[6]),
                 "blocks_are": "groups of grains sub-stepped together, out of touch with the other blocks "
-                              "(collide.py, \"Blocks\"); a phase is redone as one block when that fails",
+                              "(collide.py, \"Blocks\"); when two blocks' grains came near each other the "
+                              "phase is redone with their groups joined (merged), after 3 such passes as one "
+                              "block (unblocked)",
             }
         return out
 
@@ -299,7 +302,7 @@ class Stepper:
         self.cl = cl
         for name in ("contact_substeps", "overlap_sum", "bed_overlap_max"):
             getattr(self.ph, name)[...] = arrays["ph_" + name]
-        saved = arrays["ph_counters"]  # checkpoints before the block counters have 5
+        saved = arrays["ph_counters"]  # older checkpoints have 5 or 7
         self.ph.counters[:saved.shape[0]] = saved
         for name in BED_CONTACT_STATE:
             getattr(self.bc, name)[...] = arrays["bc_" + name]

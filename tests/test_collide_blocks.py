@@ -1,15 +1,17 @@
 """Temporal blocking of the contact phase (collide.py, "Blocks"): the sub-stepped grains
 run block by block, and the result must be the one of a single sweep over all of them,
 bit for bit, both when the blocks stay apart and when a deflected grain crosses into
-another block (the phase is then redone as one block)."""
+another block (the phase is then redone with the two groups joined, and after
+MERGED_PASSES such passes as one block)."""
 import numpy as np
 
 from saltation import contacts as K
+from saltation.collide import MERGED_PASSES
 from test_collide_layout import run_contact_phase
 
 
-def _run(pos0, vel0, block_members, box, skin, steps, dt):
-    return run_contact_phase(pos0, vel0, steps, dt, 128, box, skin, 0.3, 0.3, block_members)
+def _run(pos0, vel0, block_members, box, skin, steps, dt, n_sub=128):
+    return run_contact_phase(pos0, vel0, steps, dt, n_sub, box, skin, 0.3, 0.3, block_members)
 
 
 def _same(a, b):
@@ -32,20 +34,53 @@ def test_blocks_give_the_single_sweep_result_in_a_dense_layer_over_the_bed():
     ph_b, ph_s = blocked[2], single[2]
     assert ph_s.counters[5] == 5  # one block per step
     assert ph_b.counters[5] > 10 * 5  # many blocks per step
-    assert ph_b.counters[6] == 0  # none redone: the blocks stayed apart
+    assert ph_b.counters[6] == ph_b.counters[7] == 0  # none redone: the blocks stayed apart
     assert ph_b.counters[3] == ph_s.counters[3] > 0  # the same grain-sub-steps
     assert blocked[1].collisions.sum() > 20 and blocked[0].impacts.sum() >= 3
     _same(blocked, single)
 
 
-def test_a_grain_knocked_into_another_block_makes_the_phase_redo_as_one_block():
-    # grain 1 knocks grain 0 into grain 2; 2 is too far from 0's free-flight path to be
-    # grouped with it (0.7 d gap > 2 x 0.25 d slack), so with one group per block the
-    # blocked pass misses 0-2, the check finds the crossing and the phase is redone
+def _cradle(row):
+    # grain 1 knocks grain 0 into a row of resting grains 0.55 d apart, like Newton's
+    # cradle, all within one step. Each row grain is touched from the side by a slow
+    # partner, so that it is a candidate in a group of its own (row gaps > 2 x 0.25 d
+    # slack); grain 1's list (cutoff 2 d) reaches 0 only
+    x = [5.0 + 1.55 * k for k in range(row)]
+    pos = [[5.0, 3.0, 5.0], [5.0 - 1.05, 3.0, 5.0]] + [[xi, 3.0, 5.0] for xi in x[1:]]
+    pos += [[xi, 3.0, 5.0 + 1.02] for xi in x[1:]]
+    vel = np.zeros((len(pos), 3))
+    vel[1, 0] = 30.0
+    vel[row + 1:, 2] = -0.5
+    pos = np.array(pos)
+    box = (24.0, 8.0, 12.0)
+    return _run(pos, vel, 1, box, 1.0, 1, 0.1, 256), _run(pos, vel, 10 ** 9, box, 1.0, 1, 0.1, 256)
+
+
+def test_a_grain_knocked_into_another_block_makes_the_phase_redo_with_the_groups_joined():
+    # 0 is knocked into 2 (another block): the check finds the crossing, the pass is
+    # redone with 0's and 2's groups joined; then 2 is knocked into 3: joined too
+    blocked, single = _cradle(3)
+    assert blocked[2].counters[7] == 2 and blocked[2].counters[6] == 0
+    assert single[2].counters[6] == single[2].counters[7] == 0
+    assert blocked[0].vel[3, 0] > 1.0  # the last grain of the row was hit
+    _same(blocked, single)
+
+
+def test_a_chain_of_crossings_ends_in_one_block():
+    # a longer row: every pass finds one more crossing; after MERGED_PASSES passes with
+    # joined groups the phase is redone as one block
+    blocked, single = _cradle(MERGED_PASSES + 2)
+    assert blocked[2].counters[7] == MERGED_PASSES and blocked[2].counters[6] == 1
+    assert blocked[0].vel[MERGED_PASSES + 2, 0] > 1.0  # the last grain of the row
+    _same(blocked, single)
+
+
+def test_a_crossing_in_a_later_step_is_redone_too():
+    # grain 1 knocks grain 0 into grain 2 over two shorter steps
     pos = np.array([[5.0, 3.0, 5.0], [5.0 - 1.05, 3.0, 5.0], [5.0 + 1.7, 3.0, 5.0]])
     vel = np.array([[0.0, 0.0, 0.0], [30.0, 0.0, 0.0], [0.0, 0.0, 0.0]])
     blocked = _run(pos, vel, 1, (12.0, 8.0, 12.0), 1.0, 2, 0.05)
     single = _run(pos, vel, 10 ** 9, (12.0, 8.0, 12.0), 1.0, 2, 0.05)
-    assert blocked[2].counters[6] >= 1 and single[2].counters[6] == 0
+    assert blocked[2].counters[7] >= 1 and single[2].counters[7] == 0
     assert blocked[0].vel[2, 0] > 1.0  # grain 2 was hit
     _same(blocked, single)
