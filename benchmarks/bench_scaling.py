@@ -35,6 +35,8 @@ grain-sub-step done (it also carries the phase's O(N) passes: reach, list rebuil
 engagement test, gather). The sub-stepped share depends on how far the grains have
 spread from their initial layer; every point gets the same spin-up and timed steps, so
 in series (a) the sub-stepped share should come out the same at every N.
+Columns "blk/st" and "redo": blocks per step and contact phases redone (collide.py,
+"Blocks": the sub-stepped grains run block by block while each block sits in cache).
 
 Prints a table and one JSON object (also written to ``--json``). The machine may be
 shared: the 1-minute load average is printed with every point, and ``cpu_per_step_ms``
@@ -176,7 +178,8 @@ def run_point(n, concentration, args) -> dict:
 
 def table(rows, title):
     head = (f"{'N':>7} {'C %':>6} {'ms/step':>9} {'p-steps/s':>10} {'us/p-step':>9} {'free fl.':>8} {'bed':>6} "
-            f"{'contacts':>8} {'sub-st.%':>8} {'ns/g-sub':>8} {'coll/p':>7} {'RSS B/p':>8} {'load':>5}")
+            f"{'contacts':>8} {'sub-st.%':>8} {'ns/g-sub':>8} {'blk/st':>6} {'redo':>4} {'coll/p':>7} {'RSS B/p':>8} "
+            f"{'load':>5}")
     print(f"\n{title}\n{head}\n" + "-" * len(head))
     for r in rows:
         if "error" in r:
@@ -185,6 +188,8 @@ def table(rows, title):
         print(f"{r['n']:>7} {r['concentration_pct']:>6.2f} {r['wall_per_step_ms']:>9.2f} {r['particle_steps_per_s']:>10.3g} "
               f"{r['us_per_particle_step']:>9.2f} {r['free_flight_us']:>8.2f} {r['bed_us']:>6.2f} {r['contacts_us']:>8.2f} "
               f"{100 * r.get('substepped_fraction', 0.0):>8.2f} {r.get('contacts_ns_per_grain_substep') or 0.0:>8.0f} "
+              f"{r.get('blocks_per_step', 0.0):>6.0f} "
+              f"{r.get('phases_redone_merged', 0) + r.get('phases_redone_unblocked', 0):>4d} "
               f"{r.get('collisions_per_particle', 0.0):>7.2f} "
               f"{r['peak_rss_bytes_per_particle']:>8.0f} {r['load_avg_1min']:>5.2f}")
 

@@ -169,6 +169,7 @@ from .history import META_COUNT
 from .rng import uniform2
 
 __all__ = ["ContactPhase", "SubstepSet", "BedContext", "make_contact_phase", "make_bed_context", "soft_contact_phase",
+           "empty_substep_set",
            "hard_contact_phase"]
 
 BLOCK_SLACK = 0.2  # d: deviation from free flight a block allows each grain ("Blocks")
@@ -301,6 +302,12 @@ def _make_set(c, r):
         np.empty((c, 3)), np.empty(c, np.int64), np.empty(c), np.empty(c), np.empty(c), np.empty(c, np.int64),
         np.empty(c, np.int64), np.empty(c, np.int64),
     )
+
+
+@njit(cache=True)
+def empty_substep_set():
+    """A SubstepSet with no room yet, for the first soft_contact_phase (it grows it)."""
+    return _make_set(1, 1)
 
 
 @njit(cache=True)
@@ -1071,13 +1078,14 @@ def _blocks(x0w, pos, vel, cl, ph, gid, dt, d, cap, forced):
 
 
 @njit(cache=True)
-def _gather(x0w, st, cl, bc, ph, dt, d, blocked, forced):
+def _gather(x0w, st, cl, bc, ph, dt, d, blocked, forced, cs):
     """The SubstepSet of this phase: the candidates (start ≤ 1) with their rows and their
     list neighbours, numbered in the list's cell order, block by block ("Blocks"; one
     block when not ``blocked``; groups joined by ``forced``, see _blocks). Returns it, the
     candidates (member indices) by block and then by start, each block's first candidate
     (n_blocks + 1) and first member, and each member's index in cell order → its index in
-    the set."""
+    the set. ``cs``: the set of an earlier phase, reused (grown when too small: fresh
+    arrays of ~1 kB per member cost a page fault per 4 kB at first touch, every step)."""
     n = x0w.shape[0]
     loc, start, nbr, nbr_count = ph.loc, ph.start, cl.nbr, cl.nbr_count
     members = 0
@@ -1113,7 +1121,9 @@ def _gather(x0w, st, cl, bc, ph, dt, d, blocked, forced):
         mstart = np.array([0, members])
     n_blocks = mstart.shape[0] - 1
     # room for some woken grains' rows and new neighbours (_give_row grows it if needed)
-    cs = _make_set(members + members // 8 + 16, rows + rows // 8 + 8 * nbr.shape[1])
+    cs = _grow(cs, members + members // 8 + 16, rows + rows // 8 + 8 * nbr.shape[1])
+    cs.n_rows[0] = 0
+    cs.n_act[0] = 0
     for p in range(members):
         loc[gid[p]] = new[p]
         cs.gid[new[p]] = gid[p]
@@ -1276,9 +1286,7 @@ def _conflicts(cs, dt, d, box, per, forced, new, mstart):
     (an appended member, whose group is not known, joins its whole block). Returns their
     number: 0 certifies the pass."""
     m0 = mstart[mstart.shape[0] - 1]
-    cell_of = np.empty(m0, np.int64)  # set index → index in cell order (the gather's)
-    for p in range(m0):
-        cell_of[new[p]] = p
+    cell_of = np.empty(0, np.int64)  # set index → index in cell order (the gather's), when needed
     path = cs.path
     n_bad = 0
     for a in range(cs.n[0]):
@@ -1297,6 +1305,10 @@ def _conflicts(cs, dt, d, box, per, forced, new, mstart):
             n_bad += 1
             if forced.shape[0] != m0:
                 continue  # no forest to join in (the caller redoes the phase as one block)
+            if cell_of.shape[0] == 0:
+                cell_of = np.empty(m0, np.int64)
+                for p in range(m0):
+                    cell_of[new[p]] = p
             _join_groups(forced, _group_of(cs, a, cell_of, forced, mstart), _group_of(cs, b, cell_of, forced, mstart))
     return n_bad
 
@@ -1379,12 +1391,13 @@ def _with_skin(cl, skin):
 
 
 @njit(cache=True)
-def soft_contact_phase(st, x0w, model, cl, ph, bc, t0, step, dt, n_sub):
+def soft_contact_phase(st, x0w, model, cl, ph, bc, t0, step, dt, n_sub, cs):
     """Phase 2 of the module docstring for all grains: the free flight (x₀ in ``x0w``
     (N, 9) = w.x0, x₁ in ``st``) of step ``step`` (from t0) corrected by soft contacts
     with grains and the bed in ``n_sub`` sub-steps. ``ph.active`` says afterwards which
-    grains were sub-stepped (their bed is done; the bed pass must skip them). Returns the
-    ContactList to keep (it may have been rebuilt)."""
+    grains were sub-stepped (their bed is done; the bed pass must skip them). ``cs``: the
+    SubstepSet the previous phase returned (or ``empty_substep_set()``), reused. Returns
+    the ContactList to keep (it may have been rebuilt) and the set to pass next time."""
     pos, vel = st.pos, st.vel
     bc.t0[0] = t0
     bc.ints[1] = step
@@ -1419,7 +1432,7 @@ def soft_contact_phase(st, x0w, model, cl, ph, bc, t0, step, dt, n_sub):
         if ph.start[i] <= 1.0:
             n_cand += 1
     if n_cand == 0:
-        return cl
+        return cl, cs
     # the candidates and their neighbours, in compact cell-ordered arrays (module
     # docstring, "Memory layout"), block by block ("Blocks"); candidates join by the
     # time they may first touch something (docstring: who is sub-stepped)
@@ -1429,7 +1442,7 @@ def soft_contact_phase(st, x0w, model, cl, ph, bc, t0, step, dt, n_sub):
     forced = np.empty(0, np.int64)  # groups joined after a failed pass (_conflicts)
     passes = 0
     while True:
-        cs, cand, cstart, mstart, new = _gather(x0w, st, cl, bc, ph, dt, d, passes <= MERGED_PASSES, forced)
+        cs, cand, cstart, mstart, new = _gather(x0w, st, cl, bc, ph, dt, d, passes <= MERGED_PASSES, forced, cs)
         n_blocks = mstart.shape[0] - 1
         for b in range(n_blocks):
             if cstart[b + 1] > cstart[b]:
@@ -1455,7 +1468,7 @@ def soft_contact_phase(st, x0w, model, cl, ph, bc, t0, step, dt, n_sub):
         # list does not hold (an actual miss), with fresh cells
         ph.counters[1] += over
         ph.counters[4] += _missed_contacts(st.pos, cl)
-    return cl
+    return cl, cs
 
 
 @njit(cache=True)

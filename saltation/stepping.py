@@ -25,7 +25,7 @@ import time
 import numpy as np
 from numba import njit, objmode, prange
 
-from .collide import hard_contact_phase, make_bed_context, make_contact_phase, soft_contact_phase
+from .collide import empty_substep_set, hard_contact_phase, make_bed_context, make_contact_phase, soft_contact_phase
 from .contacts import contact_model_from_case, make_contact_list, rebuild
 from .integrator import CHUNK, OK, NOT_FINITE, _bed_check_body, free_flight_particles  # the inline bed body
 from .packed_bed import make_packed_bed, packed_bed_check_particle
@@ -89,6 +89,7 @@ def advance_split(f, coef, bed, seed, st, w, hc, t0, dt, n_steps, top, step0, co
     ContactList to keep)."""
     n = st.pos.shape[0]
     cap = st.jump_buf.shape[1]
+    cs = empty_substep_set()  # the contact phase's compact set, reused from step to step
     for s in range(n_steps):
         t = t0 + s * dt
         c0 = _clock()
@@ -101,7 +102,7 @@ def advance_split(f, coef, bed, seed, st, w, hc, t0, dt, n_steps, top, step0, co
                 break
         if not bad:
             if contacts_mode == CONTACTS_SOFT:
-                cl = soft_contact_phase(st, w.x0, model, cl, ph, bc, t, step0 + s, dt, n_sub)
+                cl, cs = soft_contact_phase(st, w.x0, model, cl, ph, bc, t, step0 + s, dt, n_sub, cs)
             elif contacts_mode == CONTACTS_HARD:
                 hard_contact_phase(st, cl, restitution, friction, scratch)
         c2 = _clock()

@@ -4,7 +4,7 @@ the compact set; the set grows without losing its contents; bystanders change no
 import numpy as np
 
 from saltation import contacts as K
-from saltation.collide import _grow, _make_set, make_bed_context, make_contact_phase, soft_contact_phase
+from saltation.collide import empty_substep_set, _grow, _make_set, make_bed_context, make_contact_phase, soft_contact_phase
 from saltation.integrator import make_state, make_workspace
 from saltation.packed_bed import make_packed_bed
 
@@ -21,12 +21,13 @@ def run_contact_phase(pos0, vel0, steps=3, dt=0.02, n_sub=128, box=(12.0, 8.0, 1
     ph = make_contact_phase(n) if block_members is None else make_contact_phase(n, block_members)
     bc = make_bed_context(n, False, make_packed_bed(3.0, 3.0), 0.65, bed_friction, 0.5, model.kn, model.kt, 0,
                           np.full(n, -2, np.int64))
+    cs = empty_substep_set()
     for s in range(steps):
         ws.x0[:, 0:3] = st.pos
         ws.x0[:, 3:6] = st.vel
         ws.x0[:, 6:9] = st.spin
         st.pos[:] += dt * st.vel
-        cl = soft_contact_phase(st, ws.x0, model, cl, ph, bc, s * dt, s, dt, n_sub)
+        cl, cs = soft_contact_phase(st, ws.x0, model, cl, ph, bc, s * dt, s, dt, n_sub, cs)
         assert (ph.loc == -1).all()  # the set is released after each phase
     return st, cl, ph
 

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from saltation import contacts as K
-from saltation.collide import make_bed_context, make_contact_phase, soft_contact_phase
+from saltation.collide import empty_substep_set, make_bed_context, make_contact_phase, soft_contact_phase
 from saltation.integrator import make_state
 from saltation.packed_bed import BED_CENTRE_Y, hexagonal_layer, make_packed_bed, packed_bed_check_particle
 from saltation.integrator import make_workspace
@@ -60,12 +60,13 @@ def test_contact_phase_reproduces_velocity_verlet_on_straight_paths():
     ph = make_contact_phase(2)
     pb = make_packed_bed(3.0, 3.0)
     bc = make_bed_context(2, False, pb, 0.65, 0.1, 0.5, model.kn, model.kt, 0, np.full(2, -2, np.int64))
+    cs = empty_substep_set()
     for s in range(steps):
         ws.x0[:, 0:3] = st.pos
         ws.x0[:, 3:6] = st.vel
         ws.x0[:, 6:9] = st.spin
         st.pos[:] += dt * st.vel  # free flight without forces
-        cl = soft_contact_phase(st, ws.x0, model, cl, ph, bc, s * dt, s, dt, n_sub)
+        cl, cs = soft_contact_phase(st, ws.x0, model, cl, ph, bc, s * dt, s, dt, n_sub, cs)
     assert cl.collisions.sum() == 2 and cl_ref.collisions.sum() == 2
     np.testing.assert_allclose(st.pos, p_ref, atol=1e-9)
     np.testing.assert_allclose(st.vel, v_ref, atol=1e-8)
@@ -89,12 +90,13 @@ def test_a_grain_not_engaged_is_woken_when_a_deflected_grain_hits_it():
     bc = make_bed_context(3, False, make_packed_bed(3.0, 3.0), 0.65, 0.1, 0.5, model.kn, model.kt, 0,
                           np.full(3, -2, np.int64))
     p_total = st.vel.sum(axis=0).copy()
+    cs = empty_substep_set()
     for s in range(3):
         ws.x0[:, 0:3] = st.pos
         ws.x0[:, 3:6] = st.vel
         ws.x0[:, 6:9] = st.spin
         st.pos[:] += dt * st.vel
-        cl = soft_contact_phase(st, ws.x0, model, cl, ph, bc, s * dt, s, dt, n_sub)
+        cl, cs = soft_contact_phase(st, ws.x0, model, cl, ph, bc, s * dt, s, dt, n_sub, cs)
     assert ph.counters[2] >= 1  # a wake-up happened
     assert st.vel[2, 0] > 1.0  # grain 2 was hit
     np.testing.assert_allclose(st.vel.sum(axis=0), p_total, atol=1e-9)
