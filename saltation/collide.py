@@ -147,7 +147,10 @@ rebounds on the tilted virtual bed (deviations ~0.2 d) cross into other blocks.
 Measured at 50 000 grains, 1 % (``benchmarks/bench_scaling.py`` set-up, 40 steps):
 σ = (0.25, 0.1) d: a giant group, 659 ns per grain-sub-step, no pass redone;
 (0.1, 0.1): 463 ns, 13 passes redone; (0.05, 0.05): 652 ns, 61 redone;
-(0.2, 0.05): 328 ns, none redone (5 000 grains: ~300 ns).
+(0.2, 0.05): 328 ns, none redone (5 000 grains: ~300 ns). Denser suspensions percolate
+even so (2 % in the paper's box: 52 blocks per step, 939 ns per grain-sub-step), so a group
+of more than GIANT_GROUP = 256 members is cut again with σ = (0.15, 0.02) d: 583 ns, 1
+pass redone in 20 steps ((0.1, 0) d: 615 ns but 10 redone — every redo reruns all blocks).
 
 Statistics (per grain, race-free): ``cl.collisions`` (contacts begun), ``cl.max_overlap``,
 and here ``contact_substeps`` (sub-steps spent in each contact, summed) and
@@ -175,6 +178,9 @@ __all__ = ["ContactPhase", "SubstepSet", "BedContext", "make_contact_phase", "ma
 BLOCK_SLACK = 0.2  # d: deviation from free flight a block allows each grain ("Blocks")
 QUIET_SLACK = 0.05  # d: the same for pairs of grains that cannot touch on their free-flight paths
 BLOCK_MEMBERS = 256  # members per block (~1 kB each: a block stays in a 1 MB L2 cache)
+GIANT_GROUP = 256  # members: a larger group (a dense layer percolating) is cut with tighter slacks
+GIANT_BLOCK_SLACK = 0.15  # d: those slacks
+GIANT_QUIET_SLACK = 0.02
 MERGED_PASSES = 3  # passes redone with the conflicting groups joined before one that is a single block
 BED_SLOTS = 4  # bed spheres one grain can touch at once (3 in a hollow of the packed layer)
 FREE = -1  # an empty bed-contact slot
@@ -227,16 +233,18 @@ class ContactPhase(NamedTuple):
     counters: np.ndarray  # (8,) int64: list rebuilds, overruns, wakes, sub-stepped grain-steps, missed,
     #                       blocks run, phases redone as one block, phases redone in merged blocks ("Blocks")
     block_members: np.ndarray  # (1,) int64 most members per block (BLOCK_MEMBERS; "Blocks")
-    block_slack: np.ndarray  # (2,) float64 σ (d) of candidates and of the other members (BLOCK_SLACK, QUIET_SLACK)
+    block_slack: np.ndarray  # (5,) float64 σ (d) of candidates and of the other members (BLOCK_SLACK,
+    #                          QUIET_SLACK), the same inside giant groups, giant group size (GIANT_*; "Blocks")
 
 
-def make_contact_phase(n: int, block_members: int = BLOCK_MEMBERS, block_slack=(BLOCK_SLACK, QUIET_SLACK)
+def make_contact_phase(n: int, block_members: int = BLOCK_MEMBERS,
+                       block_slack=(BLOCK_SLACK, QUIET_SLACK, GIANT_BLOCK_SLACK, GIANT_QUIET_SLACK, GIANT_GROUP)
                        ) -> ContactPhase:
     return ContactPhase(
         np.zeros(n, np.uint8), np.zeros(n, np.int64), np.zeros(1, np.int64), np.zeros(n), np.zeros((n, 3)),
         np.zeros(n), np.zeros(n), np.zeros(n), np.full(n, -1, np.int64), np.zeros(n), np.zeros(n, np.int64),
         np.zeros(n), np.zeros(8, np.int64), np.array([block_members], np.int64),
-        np.array([float(block_slack[0]), float(block_slack[1])]),
+        np.array([float(x) for x in block_slack]),
     )
 
 
@@ -1010,32 +1018,30 @@ def _root(parent, p):
 
 
 @njit(cache=True)
-def _blocks(x0w, pos, vel, cl, ph, gid, dt, d, cap, forced):
-    """Blocks of the members gid[0..m-1] (a grain id each, in cell order; ph.loc[g] their
-    index): groups that stay out of touch with each other on paths deviating by less than
-    σ from free flight are the connected components of the pairs that come closer than
-    d + 2σ (or touch now), joined further by the union–find forest ``forced`` over the
-    members (pairs that met across blocks in an earlier pass; empty: none); consecutive
-    groups fill a block up to ``cap`` members. Returns each member's new index, its block,
-    and the blocks' first members (n_blocks + 1)."""
+def _group_pairs(x0w, pos, vel, cl, ph, gid, dt, forced, limits, tight):
+    """Union–find over the members gid[0..m-1] (ph.loc[g]: their index): every member's
+    list pairs with other members that come closer than d + 2σ on their free-flight paths
+    (or touch now) are joined, starting from the forest ``forced`` (empty: none). ``limits``:
+    d + 2σ for pairs with a candidate, for other pairs, and the same two for members with
+    ``tight[p]`` set (empty: none). Returns each member's group root (its least member)."""
     m = gid.shape[0]
     box, per = cl.grid.box, cl.grid.periodic
     nbr, nbr_count, touch = cl.nbr, cl.nbr_count, cl.touch
-    reach_limit = d * (1.0 + 2.0 * ph.block_slack[0])
-    quiet_limit = d * (1.0 + 2.0 * ph.block_slack[1])
     parent = np.arange(m)
     if forced.shape[0] == m:
         for p in range(m):
             parent[p] = _root(forced, p)  # roots are the least index there too
+    use_tight = tight.shape[0] == m
     for p in range(m):
         # every member's list pairs with other members: a neighbour that is woken gets its
         # row, and its pairs are looked at, only later
         i = gid[p]
+        t = 2 if use_tight and tight[p] != 0 else 0
         for k in range(nbr_count[i]):
             j = nbr[i, k]
             if ph.loc[j] < 0:
                 continue
-            lim = reach_limit if ph.start[i] <= 1.0 or ph.start[j] <= 1.0 else quiet_limit
+            lim = limits[t] if ph.start[i] <= 1.0 or ph.start[j] <= 1.0 else limits[t + 1]
             if touch[i, k] == 0 and _path_gap(x0w[i, 0:3], pos[i], x0w[i, 3:6], vel[i], x0w[j, 0:3], pos[j],
                                               x0w[j, 3:6], vel[j], box, per, dt) >= lim:
                 continue
@@ -1045,10 +1051,41 @@ def _blocks(x0w, pos, vel, cl, ph, gid, dt, d, cap, forced):
                 parent[rj] = ri
             elif rj < ri:
                 parent[ri] = rj
+    for p in range(m):
+        parent[p] = _root(parent, p)
+    return parent
+
+
+@njit(cache=True)
+def _blocks(x0w, pos, vel, cl, ph, gid, dt, d, cap, forced):
+    """Blocks of the members gid[0..m-1] (a grain id each, in cell order; ph.loc[g] their
+    index): groups that stay out of touch with each other on paths deviating by less than
+    σ from free flight are the connected components of the pairs that come closer than
+    d + 2σ (or touch now), joined further by the union–find forest ``forced`` over the
+    members (pairs that met across blocks in an earlier pass; empty: none). A group larger
+    than ``ph.block_slack[4]`` members (a dense layer percolating) is cut again with the
+    tighter slacks ``ph.block_slack[2:4]``. Consecutive groups fill a block up to ``cap``
+    members. Returns each member's new index, its block, and the blocks' first members
+    (n_blocks + 1)."""
+    m = gid.shape[0]
+    sl = ph.block_slack
+    limits = np.array([d * (1.0 + 2.0 * sl[0]), d * (1.0 + 2.0 * sl[1]), d * (1.0 + 2.0 * sl[2]),
+                       d * (1.0 + 2.0 * sl[3])])
+    parent = _group_pairs(x0w, pos, vel, cl, ph, gid, dt, forced, limits, np.empty(0, np.uint8))
     size = np.zeros(m, np.int64)
     for p in range(m):
-        parent[p] = _root(parent, p)  # the group's first member (roots are the least index)
         size[parent[p]] += 1
+    giant = np.zeros(m, np.uint8)
+    n_giant = 0
+    for p in range(m):
+        if size[parent[p]] > sl[4]:
+            giant[p] = 1
+            n_giant += 1
+    if n_giant > 0:
+        parent = _group_pairs(x0w, pos, vel, cl, ph, gid, dt, forced, limits, giant)
+    size[:] = 0
+    for p in range(m):
+        size[parent[p]] += 1  # parent[p]: the group's first member (roots are the least index)
     base = np.empty(m, np.int64)
     blk_of = np.empty(m, np.int64)
     starts = np.empty(m + 1, np.int64)

@@ -10,8 +10,8 @@ from saltation.collide import MERGED_PASSES
 from test_collide_layout import run_contact_phase
 
 
-def _run(pos0, vel0, block_members, box, skin, steps, dt, n_sub=128):
-    return run_contact_phase(pos0, vel0, steps, dt, n_sub, box, skin, 0.3, 0.3, block_members)
+def _run(pos0, vel0, block_members, box, skin, steps, dt, n_sub=128, block_slack=None):
+    return run_contact_phase(pos0, vel0, steps, dt, n_sub, box, skin, 0.3, 0.3, block_members, block_slack)
 
 
 def _same(a, b):
@@ -38,6 +38,23 @@ def test_blocks_give_the_single_sweep_result_in_a_dense_layer_over_the_bed():
     assert ph_b.counters[3] == ph_s.counters[3] > 0  # the same grain-sub-steps
     assert blocked[1].collisions.sum() > 20 and blocked[0].impacts.sum() >= 3
     _same(blocked, single)
+
+
+def test_giant_groups_are_cut_with_tighter_slacks_and_give_the_same_result():
+    # the dense layer again; groups of more than 10 members are cut with zero slack
+    # (collide.py, "Blocks"): more blocks, crossings redone, the single sweep's result
+    box = (24.0, 8.0, 12.0)
+    pos, vel, _ = K.random_gas(300, (24.0, 4.0, 12.0), 1.0, 5, 3.0, 0.02)
+    pos[:, 1] += 0.55
+    vel[:, 0] += 4.0
+    default = _run(pos, vel, 1, box, 0.6, 5, 0.02)
+    cut = _run(pos, vel, 1, box, 0.6, 5, 0.02, block_slack=(0.2, 0.05, 0.0, 0.0, 10))
+    single = _run(pos, vel, 10 ** 9, box, 0.6, 5, 0.02)
+    assert cut[2].counters[5] > default[2].counters[5]  # more, smaller blocks
+    assert cut[2].counters[6] == 0  # never fell back to one block
+    assert cut[1].collisions.sum() > 20
+    _same(cut, single)
+    _same(default, single)
 
 
 def _cradle(row):

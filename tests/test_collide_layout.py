@@ -10,7 +10,7 @@ from saltation.packed_bed import make_packed_bed
 
 
 def run_contact_phase(pos0, vel0, steps=3, dt=0.02, n_sub=128, box=(12.0, 8.0, 12.0), skin=0.6, friction=0.2,
-                      bed_friction=0.1, block_members=None):
+                      bed_friction=0.1, block_members=None, block_slack=None):
     """Straight-line free flight plus the contact phase for ``steps`` steps (virtual bed);
     returns the state, the list and the phase."""
     n = len(pos0)
@@ -18,7 +18,11 @@ def run_contact_phase(pos0, vel0, steps=3, dt=0.02, n_sub=128, box=(12.0, 8.0, 1
     st = make_state(pos0, vel0, np.zeros((n, 3)), 0.0, 4)
     ws = make_workspace(n)
     cl = K.make_contact_list(st.pos, box, (True, False, True), 1.0, skin)
-    ph = make_contact_phase(n) if block_members is None else make_contact_phase(n, block_members)
+    ph = make_contact_phase(n)
+    if block_members is not None:
+        ph.block_members[0] = block_members
+    if block_slack is not None:
+        ph.block_slack[:] = block_slack
     bc = make_bed_context(n, False, make_packed_bed(3.0, 3.0), 0.65, bed_friction, 0.5, model.kn, model.kt, 0,
                           np.full(n, -2, np.int64))
     cs = empty_substep_set()
