@@ -22,13 +22,18 @@ def _same(a, b):
     np.testing.assert_array_equal(ca.max_overlap, cb.max_overlap)
 
 
-def test_blocks_give_the_single_sweep_result_in_a_dense_layer_over_the_bed():
-    # 300 grains in a 24 x 4 x 24 d layer just over the bed top (5.5 % solids): contacts
-    # between grains and with the bed (bed impacts write jump records) in every step
-    box = (24.0, 8.0, 24.0)
-    pos, vel, _ = K.random_gas(300, (24.0, 4.0, 24.0), 1.0, 3, 3.0, 0.02)
+def _layer(lz, seed):
+    # 300 grains in a 24 x 4 x lz d layer just over the bed top, drifting downstream
+    pos, vel, _ = K.random_gas(300, (24.0, 4.0, lz), 1.0, seed, 3.0, 0.02)
     pos[:, 1] += 0.55
     vel[:, 0] += 4.0
+    return (24.0, 8.0, lz), pos, vel
+
+
+def test_blocks_give_the_single_sweep_result_in_a_dense_layer_over_the_bed():
+    # 6.8 % solids in the layer: contacts between grains and with the bed (bed impacts write jump
+    # records) in every step
+    box, pos, vel = _layer(24.0, 3)
     blocked = _run(pos, vel, 1, box, 0.6, 5, 0.02)
     single = _run(pos, vel, 10 ** 9, box, 0.6, 5, 0.02)
     ph_b, ph_s = blocked[2], single[2]
@@ -41,12 +46,9 @@ def test_blocks_give_the_single_sweep_result_in_a_dense_layer_over_the_bed():
 
 
 def test_giant_groups_are_cut_with_tighter_slacks_and_give_the_same_result():
-    # the dense layer again; groups of more than 10 members are cut with zero slack
-    # (collide.py, "Blocks"): more blocks, crossings redone, the single sweep's result
-    box = (24.0, 8.0, 12.0)
-    pos, vel, _ = K.random_gas(300, (24.0, 4.0, 12.0), 1.0, 5, 3.0, 0.02)
-    pos[:, 1] += 0.55
-    vel[:, 0] += 4.0
+    # a denser layer (13.6 % solids); groups of more than 10 members are cut with zero
+    # slack (collide.py, "Blocks"): more blocks, crossings redone, the single sweep's result
+    box, pos, vel = _layer(12.0, 5)
     default = _run(pos, vel, 1, box, 0.6, 5, 0.02)
     cut = _run(pos, vel, 1, box, 0.6, 5, 0.02, block_slack=(0.2, 0.05, 0.0, 0.0, 10))
     single = _run(pos, vel, 10 ** 9, box, 0.6, 5, 0.02)
