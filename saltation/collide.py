@@ -1017,6 +1017,17 @@ def _root(parent, p):
     return p
 
 
+@njit(cache=True, inline="always")
+def _join_groups(parent, p, q):
+    """Union of p's and q's groups in the forest ``parent``; the root stays the least index."""
+    rp = _root(parent, p)
+    rq = _root(parent, q)
+    if rp < rq:
+        parent[rq] = rp
+    elif rq < rp:
+        parent[rp] = rq
+
+
 @njit(cache=True)
 def _group_pairs(x0w, pos, vel, cl, ph, gid, dt, forced, limits, tight):
     """Union–find over the members gid[0..m-1] (ph.loc[g]: their index): every member's
@@ -1045,12 +1056,7 @@ def _group_pairs(x0w, pos, vel, cl, ph, gid, dt, forced, limits, tight):
             if touch[i, k] == 0 and _path_gap(x0w[i, 0:3], pos[i], x0w[i, 3:6], vel[i], x0w[j, 0:3], pos[j],
                                               x0w[j, 3:6], vel[j], box, per, dt) >= lim:
                 continue
-            ri = _root(parent, p)
-            rj = _root(parent, ph.loc[j])
-            if ri < rj:
-                parent[rj] = ri
-            elif rj < ri:
-                parent[ri] = rj
+            _join_groups(parent, p, ph.loc[j])
     for p in range(m):
         parent[p] = _root(parent, p)
     return parent
@@ -1289,16 +1295,6 @@ def _run_block(cs, cand, c0, c1, lo, hi, blk, x0w, st, bc, model, cl, ph, dt, n_
             cs = _wake_up(cs, x0w, st, bc, model, cl, ph, s_next, dt, h, True, lo, hi, app, blk)
         _kick(cs, model, h, lo, hi, app)
     return cs
-
-
-@njit(cache=True, inline="always")
-def _join_groups(forced, p, q):
-    rp = _root(forced, p)
-    rq = _root(forced, q)
-    if rp < rq:
-        forced[rq] = rp
-    elif rq < rp:
-        forced[rp] = rq
 
 
 @njit(cache=True, inline="always")

@@ -25,7 +25,8 @@ import time
 import numpy as np
 from numba import njit, objmode, prange
 
-from .collide import empty_substep_set, hard_contact_phase, make_bed_context, make_contact_phase, soft_contact_phase
+from .collide import (MERGED_PASSES, empty_substep_set, hard_contact_phase, make_bed_context, make_contact_phase,
+                      soft_contact_phase)
 from .contacts import contact_model_from_case, make_contact_list, rebuild
 from .integrator import CHUNK, OK, NOT_FINITE, _bed_check_body, free_flight_particles  # the inline bed body
 from .packed_bed import make_packed_bed, packed_bed_check_particle
@@ -252,8 +253,8 @@ class Stepper:
                 "phases_redone_unblocked": int(ph.counters[6]),
                 "blocks_are": "groups of grains sub-stepped together, out of touch with the other blocks "
                               "(collide.py, \"Blocks\"); when two blocks' grains came near each other the "
-                              "phase is redone with their groups joined (merged), after 3 such passes as one "
-                              "block (unblocked)",
+                              f"phase is redone with their groups joined (merged), after {MERGED_PASSES} such "
+                              "passes as one block (unblocked)",
             }
         return out
 
