@@ -438,7 +438,7 @@ def initial_grains(n, domain_d, seed, y_range=(0.6, 3.0), overlap_free=False):
 # ------------------------------------------------------------------ our side
 def _simulation(case, n):
     from saltation.config import resolve_domain
-    from saltation.run import Simulation, _les_box_m, open_flow
+    from saltation.simulation import Simulation, _les_box_m, open_flow
 
     # The Simulation gives the run's coefficients (forces, bed, history, flow top); the
     # grains are ours, so the case keeps its own n_particles (N here may exceed the
@@ -588,7 +588,7 @@ def ours_run_loop(case, pos, u0_particle, n_steps, warm_steps=2):
     try:
         from saltation.config import load_case
         from saltation.integrator import make_state, make_workspace
-        from saltation.run import Simulation, _les_box_m, open_flow
+        from saltation.simulation import Simulation, _les_box_m, open_flow
         from saltation.stepping import Stepper  # noqa: F401  (present = the run loop has contacts)
     except ImportError:
         return None

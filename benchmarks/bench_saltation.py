@@ -59,7 +59,8 @@ from saltation.forces import (  # noqa: E402
 from saltation.history import history_end_step  # noqa: E402
 from saltation.initial import initial_conditions  # noqa: E402
 from saltation.integrator import GrainState, advance, make_state, make_workspace  # noqa: E402
-from saltation.run import _les_box_m  # noqa: E402
+from saltation.bed import run_bed_parameters  # noqa: E402
+from saltation.simulation import _les_box_m  # noqa: E402
 from saltation.spin import spin_rate  # noqa: E402
 
 CASE = ROOT / "cases" / "default.toml"
@@ -133,8 +134,8 @@ class Setup:
             tau_star=case.shields_number, R=case.submerged_specific_gravity, re_star=self.re_star,
             slope=case.flow.slope_radians, Cm=fc.added_mass_coefficient, C_L=fc.lift_coefficient,
             C_Omega=fc.magnus_coefficient, **sw)
-        self.bed = np.array([case.bed_restitution, case.bed_friction, case.bed.max_tilt_radians])
         self.dt = case.dt_particle
+        self.bed = run_bed_parameters(case, self.coef, self.dt)
         self.n_window = fc.basset_window
         self.hc = history.make_history_coefficients(self.dt, self.n_window)
         self.top = float(ds.y[-1]) / self.re_star

@@ -88,7 +88,7 @@ def one_point(args) -> dict:
 
     from saltation.config import load_case, resolve_domain
     from saltation.integrator import make_workspace
-    from saltation.run import Simulation, _les_box_m, open_flow
+    from saltation.simulation import Simulation, _les_box_m, open_flow
 
     numba.set_num_threads(args.threads)
 

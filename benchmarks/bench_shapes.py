@@ -17,6 +17,7 @@ import numba
 import numpy as np
 
 from flowfields import open_dataset
+from saltation.bed import bed_parameters
 from saltation import clusters, history, integrator, shapes
 from saltation.forces import CM, make_coefficients
 
@@ -33,7 +34,7 @@ def main(argv=None):
     coef = make_coefficients(tau_star=0.06, R=1.65, re_star=re_star)
     dt, nw = 0.01, 10
     hc = history.make_history_coefficients(dt, nw)
-    bed = np.array([0.65, 0.1, np.radians(30)])
+    bed = bed_parameters(0.65, 0.1, np.radians(30))
     top = float(ds.y[-1]) / re_star
     n = a.grains
     rng = np.random.default_rng(0)

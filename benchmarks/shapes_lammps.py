@@ -30,6 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
+from saltation.bed import bed_parameters
 from saltation import clusters, history, shapes
 from saltation.forces import make_coefficients
 
@@ -102,7 +103,7 @@ def run_ours(comp, pos, vel, quat, omega, *, gravity, wall, dt, t_end, every_t):
                                      spin_drag=False, jump_capacity=1000)
     w = clusters.make_cluster_work(st)
     hc = history.make_history_coefficients(dt, 10)
-    bed = np.array([1.0, 0.0, 1e-12])  # elastic, frictionless, flat
+    bed = bed_parameters(1.0, 0.0, 1e-12)  # elastic, frictionless, flat
     every = int(round(every_t / dt))
     n = int(round(t_end / every_t))
     rows = [[st.pos[0, 0], st.pos[0, 1], *st.omega[0]]]

@@ -35,7 +35,7 @@ import numpy as np
 import pandas as pd
 
 from saltation.analysis.transport import einstein_number, transport_rate
-from saltation.run import run
+from saltation.simulation import run
 from saltation.run_clusters import CLASS_IDS, spin_statistics
 from saltation.shapes import CLASSES
 

@@ -1,18 +1,25 @@
 """saltation: saltating sand grains in stored LES channel flow.
 
 ``saltation.run(case, out=None, **overrides)`` runs one case (SPEC §9) and returns a
-result with ``.summary``, ``.jumps`` and ``.tracks``.
+result with ``.summary``, ``.jumps`` and ``.tracks``; call it as often as you like in one
+process (the run loop lives in ``saltation.simulation``, so no submodule import can
+replace this function). ``saltation.analysis.diffusion.exponents`` is reachable after
+``import saltation``.
 """
 __version__ = "0.1.0"
 
 import flowfields  # noqa: E402,F401  (sets the versioned Numba cache before any kernel loads)
 
+from . import analysis  # noqa: E402,F401  (analysis.diffusion, analysis.transport: pure Python, no kernels)
+
 
 def run(case, out=None, progress=True, **overrides):
-    """Run one case file (path) or dict of tables; overrides use "table.key" names."""
-    from .run import run as _run
+    """Run one case file (path) or dict of tables; overrides use "table.key" names.
+
+    Keywords of :func:`saltation.simulation.run` (``resume``, ``overwrite``) pass through."""
+    from .simulation import run as _run
 
     return _run(case, out=out, progress=progress, **overrides)
 
 
-__all__ = ["run", "__version__"]
+__all__ = ["run", "analysis", "__version__"]

@@ -56,6 +56,7 @@ caller's job.
 import math
 from typing import NamedTuple
 
+import numpy as np
 from numba import njit
 
 NO_IMPACT = 0
@@ -64,6 +65,28 @@ SLIDE = 2
 SECOND_IMPACT = 4        # flag OR-ed into bed_rebound's code; branch = code & 3
 
 MAX_TILT = math.radians(30.0)
+# the bed parameter array every bed kernel takes (bed_parameters): restitution, friction,
+# max tilt (rad), bed model (0 virtual; clusters.BED_PACKED), then the jump thresholds of jumps.py
+BED_RESTITUTION, BED_FRICTION, BED_MAX_TILT, BED_MODEL = 0, 1, 2, 3
+BED_PARAMETER_COUNT = 6
+
+
+def bed_parameters(restitution, friction, max_tilt=MAX_TILT, *, model=0.0, min_jump_duration=0.0,
+                   min_jump_height=0.0):
+    """The bed parameter array of the kernels (slots above; jumps.py for the last two:
+    the shortest jump in d/u* and the lowest in d, from jumps.jump_thresholds)."""
+    return np.array([restitution, friction, max_tilt, model, min_jump_duration, min_jump_height], np.float64)
+
+
+def run_bed_parameters(case, coef, dt, model=0.0):
+    """bed_parameters of a run: the case's e, f and tilt, the jump thresholds for its step
+    dt (d/u*) and weight (coef: forces.make_coefficients)."""
+    from .forces import ALPHA, TAU_STAR
+    from .jumps import jump_thresholds
+
+    t_min, h_min = jump_thresholds(dt, coef[TAU_STAR], coef[ALPHA])
+    return bed_parameters(case.bed_restitution, case.bed_friction, case.bed.max_tilt_radians, model=model,
+                          min_jump_duration=t_min, min_jump_height=h_min)
 MIN_INCIDENCE = math.radians(2.0)
 PARTICLE_RADIUS = 0.5    # particle units (d = 1)
 

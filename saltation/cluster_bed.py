@@ -188,7 +188,7 @@ def packed_bed_check_cluster(st, w, p, t, dt, step, bed, pb, last_contact):
         if hits == 1:
             if last_contact[p] < step - 1:
                 # airborne since an earlier step: a jump ends here (SPEC §6)
-                end_jump(st, p, st.pos[p, 0] - st.jump_x0[p], st.jump_ymax[p], t_hit)
+                end_jump(st, p, st.pos[p, 0] - st.jump_x0[p], st.jump_ymax[p], t_hit, bed)
             st.jump_t0[p] = t_hit
             st.jump_x0[p] = st.pos[p, 0]
         for kk in range(st.cstart[p], st.cstart[p + 1]):

@@ -1005,8 +1005,9 @@ def advance_clusters_contacts(f, coef, bed, seed, st, w, hc, t0, dt, n_steps, to
     done, the ClusterContacts to keep)."""
     n = st.pos.shape[0]
     cap = st.jump_buf.shape[1]
+    k0 = round(t0 / dt)  # the global index of the first step (t0 is always k0 * dt)
     for s in range(n_steps):
-        t = t0 + s * dt
+        t = (k0 + s) * dt  # from the global step index: never from where a chunk began
         c0 = _clock()
         _free_flight(f, coef, bed, seed, st, w, hc, t, dt, top)
         c1 = _clock()

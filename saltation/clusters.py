@@ -102,11 +102,12 @@ from numba import njit, prange
 from flowfields.sampler import ABOVE_TOP, sample_column, sample_point, vorticity_from_gradient
 
 from . import history
-from .bed import virtual_bed_normal
+from .bed import BED_MODEL, virtual_bed_normal
 from .forces import (CL, CM, C_OMEGA, COS_SLOPE, ON_ADDED_MASS, ON_BASSET, ON_DRAG,
                      ON_FLUID_ACC, ON_LIFT, ON_MAGNUS, ON_WEIGHT, RE_STAR, SIN_SLOPE,
                      TAU_STAR, drag_factor)
 from .history import META_COUNT, _advance, _integral3, history_reset
+from .jumps import BED_MIN_JUMP_DURATION, BED_MIN_JUMP_HEIGHT, close_jump
 from .rng import uniform2
 from .spin import SPIN_TABLE_C, _spin_row
 
@@ -115,9 +116,8 @@ NOT_FINITE = 1
 JUMP_FIELDS = 4
 NX = 13  # x(3) v(3) q(4) Ω(3)
 SQRT_PI = math.sqrt(math.pi)
-BED_MODEL = 3  # bed[BED_MODEL]: absent or 0 → the virtual bed here; BED_PACKED → cluster_bed.py
+# bed[BED_MODEL] (bed.py): 0 → the virtual bed here; BED_PACKED → cluster_bed.py
 BED_PACKED = 1.0
-SAME_IMPACT_DT = 1e-9  # d/u*: two bed impacts closer in time are one contact event
 # wake shielding of a component by an upstream component of the same grain (docstring)
 WAKE_A = 0.5  # drag deficit of a trailing sphere touching its leader, on the axis
 WAKE_LENGTH = 6.0  # recovery length of the deficit, in the leader's diameters
@@ -805,18 +805,11 @@ def _bed_impact(st, w, p, t, dt, y_old, y_new, bed, seed):
     t_hit = t + frac * dt
     low, kb = _lowest(st, w, p, x[0], x[1], x[2], x[6], x[7], x[8], x[9])
     x[1] -= low  # the lowest point exactly on the bed top at the hit
-    # an impact at the instant of the previous one (a grazing contact closed at the end of
+    # a re-touch within a step of the last contact (a grazing contact closed at the end of
     # one step, the crossing then found at the start of the next) is the same contact
-    # event: its impulse is applied, but it ends no jump (no zero-duration "jumps")
-    if st.impacts[p] == 0 or t_hit - st.jump_t0[p] > SAME_IMPACT_DT:
-        j = st.jump_buf_n[p]
-        if j < st.jump_buf.shape[1]:
-            st.jump_buf[p, j, 0] = st.jump_t0[p]
-            st.jump_buf[p, j, 1] = x[0] - st.jump_x0[p]
-            st.jump_buf[p, j, 2] = st.jump_ymax[p]
-            st.jump_buf[p, j, 3] = t_hit - st.jump_t0[p]
-            st.jump_buf_n[p] = j + 1
-        st.jump_count[p] += 1
+    # episode: its impulse is applied, but it ends no jump (jumps.py)
+    close_jump(st, p, st.jump_t0[p], x[0] - st.jump_x0[p], st.jump_ymax[p], t_hit,
+               bed[BED_MIN_JUMP_DURATION], bed[BED_MIN_JUMP_HEIGHT])
     rot = w.rot[p]  # orientation at the hit (set by _lowest)
     rx = rot[0, 0] * st.r_body[kb, 0] + rot[0, 1] * st.r_body[kb, 1] + rot[0, 2] * st.r_body[kb, 2]
     ry = rot[1, 0] * st.r_body[kb, 0] + rot[1, 1] * st.r_body[kb, 1] + rot[1, 2] * st.r_body[kb, 2]
@@ -951,8 +944,9 @@ def advance_clusters(f, coef, bed, seed, st, w, hc, t0, dt, n_steps, top):
     when a grain is not finite or a jump buffer is full; returns the steps done."""
     n = st.pos.shape[0]
     cap = st.jump_buf.shape[1]
+    k0 = round(t0 / dt)  # the global index of the first step (t0 is always k0 * dt)
     for s in range(n_steps):
-        t = t0 + s * dt
+        t = (k0 + s) * dt  # from the global step index: never from where a chunk began
         for p in prange(n):
             if st.status[p] != OK:
                 continue

@@ -169,6 +169,7 @@ from .bed import virtual_bed_normal
 from .cells import build_cells, min_image, stencil_cells
 from .contacts import LEVER_RADIUS, ContactList, hard_sphere_collisions, normal_damping, rebuild
 from .history import META_COUNT
+from .jumps import close_jump
 from .rng import uniform2
 
 __all__ = ["ContactPhase", "SubstepSet", "BedContext", "make_contact_phase", "make_bed_context", "soft_contact_phase",
@@ -182,6 +183,7 @@ GIANT_GROUP = 256  # members: a larger group (a dense layer percolating) is cut 
 GIANT_BLOCK_SLACK = 0.15  # d: those slacks
 GIANT_QUIET_SLACK = 0.02
 MERGED_PASSES = 3  # passes redone with the conflicting groups joined before one that is a single block
+BC_MIN_JUMP_DURATION, BC_MIN_JUMP_HEIGHT = 7, 8  # slots of BedContext.params (jumps.py)
 BED_SLOTS = 4  # bed spheres one grain can touch at once (3 in a hollow of the packed layer)
 FREE = -1  # an empty bed-contact slot
 VIRTUAL = -2  # a slot holding a virtual bed grain
@@ -190,7 +192,7 @@ VIRTUAL = -2  # a slot holding a virtual bed grain
 class BedContext(NamedTuple):
     """The bed as the contact phase sees it: soft contacts with fixed bed spheres for the
     grains being sub-stepped (module docstring). Flat arrays only (parallel loops)."""
-    params: np.ndarray  # (7,) packed (0/1), e, f, max tilt (rad), γ_n (m_eff = m), k_n, k_t
+    params: np.ndarray  # (9,) packed (0/1), e, f, max tilt (rad), γ_n (m_eff = m), k_n, k_t, jump thresholds
     ints: np.ndarray  # (2,) int64: seed, index of the current step
     t0: np.ndarray  # (1,) start time of the current step (d/u*)
     centres: np.ndarray  # packed bed (packed_bed.PackedBed, flattened)
@@ -207,10 +209,13 @@ class BedContext(NamedTuple):
     last_contact: np.ndarray  # (N,) int64 last step with bed contact (shared with packed_bed)
 
 
-def make_bed_context(n, packed: bool, pb, restitution, friction, max_tilt, kn, kt, seed, last_contact):
-    """BedContext for n grains; pb: a packed_bed.PackedBed (any, when not packed)."""
+def make_bed_context(n, packed: bool, pb, restitution, friction, max_tilt, kn, kt, seed, last_contact,
+                     min_jump_duration=0.0, min_jump_height=0.0):
+    """BedContext for n grains; pb: a packed_bed.PackedBed (any, when not packed); the
+    jump thresholds as in jumps.py."""
     gamma = normal_damping(restitution, kn, 1.0) if restitution > 0.0 else 2.0 * math.sqrt(kn)
-    params = np.array([1.0 if packed else 0.0, restitution, friction, max_tilt, gamma, kn, kt])
+    params = np.array([1.0 if packed else 0.0, restitution, friction, max_tilt, gamma, kn, kt,
+                       min_jump_duration, min_jump_height])
     return BedContext(params, np.array([seed, 0], np.int64), np.zeros(1), pb.centres, pb.box, pb.ncell,
                       pb.size, pb.cell_start, pb.cell_count, pb.order, np.full((n, BED_SLOTS), FREE, np.int64),
                       np.zeros((n, BED_SLOTS, 3)), np.zeros((n, BED_SLOTS, 3)), np.zeros(n, np.uint8),
@@ -707,15 +712,8 @@ def _bed_force(a, cs, st, bc, s, dt, h, update):
                 # a bed contact begins: an impact; it ends a jump if the grain was airborne
                 cs.impacts[a] += 1
                 if cs.last_contact[a] < step - 1:
-                    g = cs.gid[a]
-                    j = st.jump_buf_n[g]
-                    if j < st.jump_buf.shape[1]:
-                        st.jump_buf[g, j, 0] = cs.jump_t0[a]
-                        st.jump_buf[g, j, 1] = px - cs.jump_x0[a]
-                        st.jump_buf[g, j, 2] = cs.jump_ymax[a] - 0.5
-                        st.jump_buf[g, j, 3] = t_now - cs.jump_t0[a]
-                        st.jump_buf_n[g] = j + 1
-                    st.jump_count[g] += 1
+                    close_jump(st, cs.gid[a], cs.jump_t0[a], px - cs.jump_x0[a], cs.jump_ymax[a] - 0.5, t_now,
+                               bc.params[BC_MIN_JUMP_DURATION], bc.params[BC_MIN_JUMP_HEIGHT])
             # in contact: the next jump starts when it ends
             cs.jump_t0[a] = t_now
             cs.jump_x0[a] = px

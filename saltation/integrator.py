@@ -32,6 +32,7 @@ from .flow import fluid_at_grain, gather_at, grain_velocity, locate_grain, same_
 from .forces import (BASSET_PREFACTOR, ON_ADDED_MASS, ON_BASSET, ON_FLUID_ACC, ON_LIFT, ON_MAGNUS, ON_SPIN,
                      R_SUBMERGED, RE_STAR, fluid_acceleration, weight_and_drag)
 from .history import META_COUNT, add_basset_acceleration, history_end_step, history_reset
+from .jumps import BED_MIN_JUMP_DURATION, BED_MIN_JUMP_HEIGHT, close_jump
 from .rng import uniform2
 from .spin import spin_rate
 
@@ -383,15 +384,9 @@ def _bed_impact(st, w, p, t, dt, y_old, y_new, bed, seed):
     x_hit = st.pos[p, 0] - back * st.vel[p, 0]
     z_hit = st.pos[p, 2] - back * st.vel[p, 2]
     t_hit = t + frac * dt
-    # close the jump (SPEC §6): length, height of the grain bottom above the bed top, duration
-    j = st.jump_buf_n[p]
-    if j < st.jump_buf.shape[1]:
-        st.jump_buf[p, j, 0] = st.jump_t0[p]
-        st.jump_buf[p, j, 1] = x_hit - st.jump_x0[p]
-        st.jump_buf[p, j, 2] = st.jump_ymax[p] - RADIUS
-        st.jump_buf[p, j, 3] = t_hit - st.jump_t0[p]
-        st.jump_buf_n[p] = j + 1
-    st.jump_count[p] += 1
+    # close the jump (SPEC §6, jumps.py): length, height of the grain bottom above the bed top
+    close_jump(st, p, st.jump_t0[p], x_hit - st.jump_x0[p], st.jump_ymax[p] - RADIUS, t_hit,
+               bed[BED_MIN_JUMP_DURATION], bed[BED_MIN_JUMP_HEIGHT])
     # rebound on a randomly tilted bed grain (bed.py), then fly on for the rest of the step
     n = w.normal[p]
     c = st.impacts[p]
@@ -417,8 +412,9 @@ def advance(f, coef, bed, seed, st, w, hc, t0, dt, n_steps, top):
     n = st.pos.shape[0]
     cap = st.jump_buf.shape[1]
     n_chunks = (n + CHUNK - 1) // CHUNK
+    k0 = round(t0 / dt)  # the global index of the first step (t0 is always k0 * dt)
     for s in range(n_steps):
-        t = t0 + s * dt
+        t = (k0 + s) * dt  # from the global step index: never from where a chunk began
         for c in prange(n_chunks):
             step_particles(f, coef, bed, seed, st, w, hc, c * CHUNK, min(n, (c + 1) * CHUNK), t, dt, top)
         stop = False

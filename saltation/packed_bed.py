@@ -52,6 +52,7 @@ from numba import njit
 from .bed import NO_IMPACT, rebound
 from .cells import allocate_cells, build_cells, make_grid, min_image
 from .history import META_COUNT
+from .jumps import BED_MIN_JUMP_DURATION, BED_MIN_JUMP_HEIGHT, close_jump
 
 RADIUS = 0.5  # grain radius (d)
 BED_CENTRE_Y = -0.5  # bed sphere centres: their tops at y = 0
@@ -124,16 +125,10 @@ def bed_offset(pb, k, x, y, z):
 
 
 @njit(cache=True, _nrt=False, inline="always")
-def end_jump(st, p, length, height, t_hit):
-    """A bed impact at t_hit closes grain p's jump (length, height in d): record it."""
-    j = st.jump_buf_n[p]
-    if j < st.jump_buf.shape[1]:
-        st.jump_buf[p, j, 0] = st.jump_t0[p]
-        st.jump_buf[p, j, 1] = length
-        st.jump_buf[p, j, 2] = height
-        st.jump_buf[p, j, 3] = t_hit - st.jump_t0[p]
-        st.jump_buf_n[p] = j + 1
-    st.jump_count[p] += 1
+def end_jump(st, p, length, height, t_hit, bed):
+    """A bed impact at t_hit ends grain p's flight (length, height in d): a jump if it
+    was one (jumps.py)."""
+    close_jump(st, p, st.jump_t0[p], length, height, t_hit, bed[BED_MIN_JUMP_DURATION], bed[BED_MIN_JUMP_HEIGHT])
 
 
 @njit(cache=True, _nrt=False)
@@ -264,7 +259,7 @@ def packed_bed_check_particle(st, w, p, t, dt, step, coef_bed, pb, last_contact)
         if hits == 1:
             if last_contact[p] < step - 1:
                 # airborne since an earlier step: a jump ends here (SPEC §6)
-                end_jump(st, p, xh - st.jump_x0[p], st.jump_ymax[p] - RADIUS, t_hit)
+                end_jump(st, p, xh - st.jump_x0[p], st.jump_ymax[p] - RADIUS, t_hit, coef_bed)
             st.jump_t0[p] = t_hit
             st.jump_x0[p] = xh
         st.hist_meta[p, META_COUNT] = 0  # the Basset history restarts (history.py)

@@ -1,7 +1,7 @@
 """One saltation run of bonded-sphere grains (issue 6 item 5; seed 000 §2.4, §4.4).
 
 ``saltation.run()`` hands a case here when ``particle.shape`` is not "sphere". The run
-mirrors run.py's :class:`~saltation.run.Simulation`: the same case keys, flow, time step,
+mirrors simulation.py's :class:`~saltation.simulation.Simulation`: the same case keys, flow, time step,
 force switches and coefficients, initial conditions (initial.py), bed (virtual bed,
 clusters.py), jump collection and writers, and a summary.json with the same keys, plus:
 
@@ -55,14 +55,15 @@ import numpy as np
 import pandas as pd
 
 from . import cluster_bed, cluster_contacts, clusters, history, shapes
+from .bed import run_bed_parameters
+from .statistics import DISCARDED_JUMPS, empty_rows, jump_statistics
 from .config import Case, CaseError, dump_toml
 from .contacts import contact_model_from_case
 from .forces import CM, make_coefficients
 from .initial import Y_RANGE, initial_conditions
 from .packed_bed import make_packed_bed
-from .writers import ClusterTrackWriter, JumpWriter, ParaViewWriter, write_json
+from .writers import ClusterTrackWriter, JumpWriter, ParaViewWriter, run_metadata, write_json, write_table
 
-DISCARDED_JUMPS = 10  # as run.py (paper §3.2)
 CHUNK_STEPS = 200
 SERIAL_BELOW = 2000
 CLASS_IDS = {c: i for i, c in enumerate(shapes.CLASSES)}  # track column class_id
@@ -105,25 +106,11 @@ def draw_grains(case: Case, n: int):
     return classes, axes, [shapes.build(*a) for a in axes]
 
 
-def _stats(rows: np.ndarray) -> dict:
-    """Jump statistics of rows (particle, jump, L, H, U) with the first jumps dropped."""
-    counted = rows[rows[:, 1] >= DISCARDED_JUMPS] if len(rows) else rows
-    counted = counted[np.lexsort((counted[:, 1], counted[:, 0]))] if len(counted) else counted
-    out = {"count": int(len(counted)), "recorded": int(len(rows)),
-           "discarded_first_per_particle": DISCARDED_JUMPS}
-    for key, col in (("H", 3), ("L", 2), ("U", 4)):
-        v = counted[:, col] if len(counted) else np.zeros(0)
-        out[f"{key}_mean"] = float(v.mean()) if len(v) else None
-        out[f"{key}_std"] = (float(v.std(ddof=1)) if len(v) > 1 else 0.0) if len(v) else None
-    out["units"] = "H, L in d; U in u*"
-    return out
-
-
 class ClusterSimulation:
     """One run of bonded-sphere grains; ``run()`` drives it to the end (module docstring)."""
 
     def __init__(self, case: Case, flow, out: Path, progress=True, resume=False):
-        from .run import SimulationError
+        from .simulation import SimulationError
 
         if resume:
             raise SimulationError(f'--resume is not available for bonded-sphere runs (particle.shape = '
@@ -145,8 +132,7 @@ class ClusterSimulation:
             added_mass=f.added_mass, fluid_acceleration=f.fluid_acceleration, basset=f.basset,
             spin=f.spin)
         self.packed = case.bed.model == "packed"
-        self.bed = np.array([case.bed_restitution, case.bed_friction, case.bed.max_tilt_radians,
-                             clusters.BED_PACKED if self.packed else 0.0])
+        self.bed = run_bed_parameters(case, self.coef, self.dt, clusters.BED_PACKED if self.packed else 0.0)
         self.pb = None  # packed bed (cluster_bed.py), built with the state
         self.last_contact = np.full(self.n, -2, np.int64)
         self.bed_s = 0.0
@@ -215,7 +201,7 @@ class ClusterSimulation:
             cluster_bed.packed_bed_pass(st, w, t0, self.dt, step0 - 1, self.bed, self.pb, self.last_contact)
             return 0
         for s in range(n):
-            t = t0 + s * self.dt
+            t = (step0 + s) * self.dt  # from the global step index (as the kernels)
             done = self._advance_flight(f, st, w, seed, t, 1)
             c0 = time.perf_counter()
             cluster_bed.packed_bed_pass(st, w, t, self.dt, step0 + s, self.bed, self.pb, self.last_contact)
@@ -258,29 +244,13 @@ class ClusterSimulation:
         out[:, 1] = bottom + placed[:, 1]
         return out
 
-    def _collect_jumps(self, st, writer: JumpWriter, rows: list):
-        nb = st.jump_buf_n
-        idx = np.nonzero(nb)[0]
-        if len(idx) == 0:
-            return
-        counts = nb[idx]
-        part = np.repeat(idx, counts)
-        data = np.concatenate([st.jump_buf[p, : nb[p]] for p in idx])
-        first = st.jump_count[idx] - counts
-        jidx = np.concatenate([np.arange(a, a + k) for a, k in zip(first, counts)])
-        length, height, duration = data[:, 1], data[:, 2], data[:, 3]
-        velocity = np.divide(length, duration, out=np.zeros_like(length), where=duration > 0)
-        writer.append(particle=part.astype(np.int32), jump=jidx.astype(np.int32), t_start=data[:, 0],
-                      length=length, height=height, duration=duration, velocity=velocity)
-        rows.append(np.column_stack([part, jidx, length, height, velocity]))
-        nb[idx] = 0
 
     # ------------------------------------------------------------------ main loop
     def run(self):
-        from .progress import progress_bar
+        from .progress import compile_notice, progress_bar
 
         from .analysis.variance import AnalysisError, RunVariance
-        from .run import RunResult, SimulationError, VARIANCE_FILE
+        from .simulation import RunResult, SimulationError, VARIANCE_FILE
 
         c = self.case
         self.out.mkdir(parents=True, exist_ok=True)
@@ -299,8 +269,8 @@ class ClusterSimulation:
                 raise CaseError(str(err), "run", "domain") from err
         f = self.flow.arrays
         d, ts = c.particle.diameter, c.time_scale
-        jw = JumpWriter(self.out / "jumps.parquet")
-        tw = ClusterTrackWriter(self.out / "tracks.parquet") if c.output.tracks else None
+        jw = JumpWriter(self.out / "jumps.parquet", meta=run_metadata(c, "jumps"))
+        tw = ClusterTrackWriter(self.out / "tracks.parquet", meta=run_metadata(c, "tracks")) if c.output.tracks else None
         vw = ParaViewWriter(self.out, d) if c.output.vtk else None
         var = None
         if c.output.variance and self.n >= 2:
@@ -314,7 +284,8 @@ class ClusterSimulation:
         seed = int(c.run.seed)
         wall0 = time.perf_counter()
         t_compile = time.perf_counter()
-        self._advance(f, st, w, seed, 0.0, 0)
+        with compile_notice(self.progress, "composites"):
+            self._advance(f, st, w, seed, 0.0, 0)
         compile_s = time.perf_counter() - t_compile
         kernel_s = 0.0
         status = "completed"
@@ -340,7 +311,7 @@ class ClusterSimulation:
                 t0 = time.perf_counter()
                 done = self._advance(f, st, w, seed, step * self.dt, nxt - step)
                 kernel_s += time.perf_counter() - t0
-                self._collect_jumps(st, jw, rows)
+                jw.collect(st, rows)
                 if np.any(st.status == clusters.NOT_FINITE):
                     status = "failed"
                     p = int(np.nonzero(st.status == clusters.NOT_FINITE)[0][0])
@@ -377,7 +348,7 @@ class ClusterSimulation:
         (d³), bed impacts, completed jumps, grain–grain collisions begun and the largest
         component overlap (d) (both 0 with contacts off)."""
         cc = self.cc
-        pd.DataFrame({
+        table = pd.DataFrame({
             "particle": np.arange(self.n, dtype=np.int32),
             "zingg_class": self.classes,
             "class_id": self.class_id,
@@ -389,7 +360,8 @@ class ClusterSimulation:
             "bed_impacts": st.impacts.copy(),
             "jumps": st.jump_count.copy(),
             "max_overlap": cc.max_overlap.copy() if cc is not None else np.zeros(self.n),
-        }).to_parquet(self.out / "particles.parquet", index=False)
+        })
+        write_table(self.out / "particles.parquet", table, run_metadata(self.case, "particles"))
 
     def _transport(self, rows):
         """q, q* of the run from tracks.parquet (analysis/transport.py) and Ackers–White."""
@@ -437,13 +409,13 @@ class ClusterSimulation:
 
     def _summary(self, st, rows, steps, wall, compile_s, kernel_s, threads, status):
         c = self.case
-        jumps = np.concatenate(rows) if rows else np.zeros((0, 5))
+        jumps = np.concatenate(rows) if rows else empty_rows()
         duration_p = steps * self.dt
         by_class = {}
         for name, cid in CLASS_IDS.items():
             grains = np.nonzero(self.class_id == cid)[0]
             if len(grains):
-                by_class[name] = _stats(jumps[np.isin(jumps[:, 0], grains)] if len(jumps) else jumps)
+                by_class[name] = jump_statistics(jumps[np.isin(jumps[:, 0], grains)] if len(jumps) else jumps)
                 by_class[name]["grains"] = int(len(grains))
         n_comp = np.array([g.n_spheres for g in self.composites])
         vol = np.array([g.volume for g in self.composites])
@@ -478,7 +450,7 @@ class ClusterSimulation:
                         "(pi/6) d^3 per grain; grain-grain contacts "
                         + ("soft, between component spheres" if self.cc is not None else "off"),
             },
-            "jumps": _stats(jumps),
+            "jumps": jump_statistics(jumps),
             "jumps_by_class": by_class,
             "collisions": self._collisions_summary(st, duration_p),
             "steps_above_flow_top": int(st.above_top.sum()),

@@ -30,6 +30,7 @@ import math
 
 import numpy as np
 
+from .bed import bed_parameters
 from .config import GRAVITY
 
 RHO_F = 1000.0
@@ -108,7 +109,7 @@ def terminal_velocity(composite, *, density=2650.0, nu=NU, quat=(1.0, 0.0, 0.0, 
     chunk = max(1, n_steps // 200)
     ts, vy, tilt, long_axis = [], [], [], []
     done = 0
-    bed = np.array([0.65, 0.1, math.radians(30.0)])
+    bed = bed_parameters(0.65, 0.1, math.radians(30.0))
     while done < n_steps:
         k = min(chunk, n_steps - done)
         clusters.advance_clusters(flow.arrays, coef, bed, 0, st, w, hc, done * dt, dt, k, 1e30)

@@ -13,7 +13,7 @@ collisions" the whole contact phase (neighbour-list upkeep, engagement test,
 sub-steps), "free flight" the RK4 pass.
 
 :class:`Stepper` holds what the phases need besides the grain state (contact list,
-contact-phase work arrays, packed bed, timers) and runs chunks of steps for run.py.
+contact-phase work arrays, packed bed, timers) and runs chunks of steps for simulation.py.
 :meth:`Stepper.state_arrays` / :meth:`Stepper.load_state_arrays` give the arrays a
 checkpoint must keep to continue bit for bit (contact history, counters, bed contacts).
 """
@@ -28,6 +28,7 @@ from numba import njit, objmode, prange
 from .collide import (MERGED_PASSES, empty_substep_set, hard_contact_phase, make_bed_context, make_contact_phase,
                       soft_contact_phase)
 from .contacts import contact_model_from_case, make_contact_list, rebuild
+from .jumps import BED_MIN_JUMP_DURATION, BED_MIN_JUMP_HEIGHT
 from .integrator import CHUNK, OK, NOT_FINITE, _bed_check_body, free_flight_particles  # the inline bed body
 from .packed_bed import make_packed_bed, packed_bed_check_particle
 
@@ -92,7 +93,7 @@ def advance_split(f, coef, bed, seed, st, w, hc, t0, dt, n_steps, top, step0, co
     cap = st.jump_buf.shape[1]
     cs = empty_substep_set()  # the contact phase's compact set, reused from step to step
     for s in range(n_steps):
-        t = t0 + s * dt
+        t = (step0 + s) * dt  # from the global step index: never from where a chunk began
         c0 = _clock()
         _free_flight(f, coef, st, w, hc, t, dt)
         c1 = _clock()
@@ -131,7 +132,7 @@ def default_skin(dt_particle: float) -> float:
 
 
 class Stepper:
-    """Contact and bed state of a run, and the chunked stepping (run.py calls
+    """Contact and bed state of a run, and the chunked stepping (simulation.py calls
     ``advance``). Particle units throughout (d, u*, d/u*)."""
 
     def __init__(self, case, n: int, domain_d, top_d: float, coef, bed, seed: int, hist_coef, dt: float):
@@ -165,7 +166,8 @@ class Stepper:
         m = self.model
         self.bc = make_bed_context(n_list if self.contacts_mode == CONTACTS_SOFT else 0, self.bed_model == BED_PACKED,
                                    self.pb, float(bed[0]), float(bed[1]), float(bed[2]), m.kn, m.kt, self.seed,
-                                   self.last_contact if self.contacts_mode == CONTACTS_SOFT else self.last_contact[:0])
+                                   self.last_contact if self.contacts_mode == CONTACTS_SOFT else self.last_contact[:0],
+                                   float(bed[BED_MIN_JUMP_DURATION]), float(bed[BED_MIN_JUMP_HEIGHT]))
         self.timers = np.zeros(3)
         self.pp_collisions_hard = 0
 

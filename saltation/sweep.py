@@ -13,7 +13,7 @@ A sweep file is a case file plus a ``[sweep]`` grid::
 The grid is the Cartesian product of the lists, in the order written (the last key
 varies fastest). Each point is a case named from its values, e.g. ``c0.04_t1.79_s0``
 (concentration shown in **percent**, τ*/τ*c, seed; other keys by their name), and runs
-through :func:`saltation.run.run` into ``OUT/cases/NAME``.
+through :func:`saltation.simulation.run` into ``OUT/cases/NAME``.
 
 Restart rules: a case whose ``summary.json`` says ``"completed"`` is finished and is not
 run again (that file is written last, atomically, after every output is closed); a case
@@ -78,6 +78,20 @@ RESULT_COLUMNS = {
 
 class SweepError(CaseError):
     """A sweep file that cannot run: the message names the key and what is allowed."""
+
+
+class MissingExtraError(ImportError):
+    """Dask (the ``[sweep]`` extra) is not installed; the message says how to install it."""
+
+
+def import_dask():
+    """(Client, LocalCluster, as_completed) of dask.distributed, or MissingExtraError."""
+    try:
+        from dask.distributed import Client, LocalCluster, as_completed
+    except ImportError as err:
+        raise MissingExtraError(f"the sweep needs the [sweep] extra: pip install 'saltation[sweep]' "
+                                f"(importing dask.distributed failed: {err})", name=err.name) from None
+    return Client, LocalCluster, as_completed
 
 
 @dataclass
@@ -250,7 +264,7 @@ def is_finished(directory: Path, case: SweepCase) -> bool:
 
 def run_case(tables: dict, values: dict, name: str, directory: str, threads: int) -> dict:
     """Run (or resume) one sweep case; returns its summary dict. Runs on a Dask worker."""
-    from .run import CHECKPOINT, SimulationError, run
+    from .simulation import CHECKPOINT, SimulationError, run
 
     directory = Path(directory)
     fingerprint = _fingerprint(tables, values)
@@ -263,11 +277,12 @@ def run_case(tables: dict, values: dict, name: str, directory: str, threads: int
     overrides["run.threads"] = int(threads)
     resume = (directory / CHECKPOINT).exists()
     try:
-        res = run(tables, out=directory, progress=False, resume=resume, **overrides)
+        # not finished with this case: resume its checkpoint, or replace whatever is there
+        res = run(tables, out=directory, progress=False, resume=resume, overwrite=not resume, **overrides)
     except SimulationError as err:
         if not (resume and str(err).startswith("cannot resume")):
             raise
-        res = run(tables, out=directory, progress=False, **overrides)  # the case changed: start afresh
+        res = run(tables, out=directory, progress=False, overwrite=True, **overrides)  # the case changed: afresh
     return res.summary
 
 
@@ -401,7 +416,7 @@ def run_sweep(source, out=None, scheduler: str | None = None, workers: int | Non
     failures = {}
     stopped = None
     if todo:
-        from dask.distributed import Client, LocalCluster, as_completed
+        Client, LocalCluster, as_completed = import_dask()
 
         n_workers, threads = plan_workers(len(todo), workers, threads_per_worker)
         if scheduler:

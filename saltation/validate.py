@@ -78,7 +78,7 @@ def _stats(result) -> dict:
 def run_validation(out, data=None, duration_scale=1.0, ablation=True, progress=True, threads=0) -> dict:
     """Run the four cases (and the ablation); write table, figure and JSON into ``out``."""
     from .config import load_case
-    from .run import run
+    from .simulation import run
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -89,7 +89,7 @@ def run_validation(out, data=None, duration_scale=1.0, ablation=True, progress=T
         overrides = {"output.vtk": False, "run.threads": threads}
         if duration_scale != 1.0:
             overrides["run.duration"] = case.run.duration * duration_scale
-        res = run(case_path, out=out / "runs" / name.removesuffix(".toml"), progress=progress, **overrides)
+        res = run(case_path, out=out / "runs" / name.removesuffix(".toml"), progress=progress, overwrite=True, **overrides)
         row = {"tau_ratio": ratio, "tau_star": res.summary["tau_star"], **_stats(res), **van_rijn(load_case(case_path))}
         rows.append(row)
         print(f"τ*/τ*c = {ratio}: {row['count']} jumps, H = {row['H_mean']:.2f} d, L = {row['L_mean']:.2f} d, U = {row['U_mean']:.2f} u*", flush=True)
@@ -111,7 +111,7 @@ def run_validation(out, data=None, duration_scale=1.0, ablation=True, progress=T
 def run_ablation(out, ratio=1.79, duration_scale=1.0, progress=True, threads=0) -> pd.DataFrame:
     """Each force off in turn at one flow intensity; % change of H, L, U vs all forces on."""
     from .config import load_case
-    from .run import run
+    from .simulation import run
 
     case_path = cases_dir() / CASES[ratio]
     case = load_case(case_path)
@@ -121,7 +121,7 @@ def run_ablation(out, ratio=1.79, duration_scale=1.0, progress=True, threads=0) 
     variants = [("all forces", {})] + [(f"no {f}", {f"forces.{f}": False}) for f in ABLATION_FORCES]
     rows = []
     for label, over in variants:
-        res = run(case_path, out=Path(out) / "ablation" / label.replace(" ", "_"), progress=progress, **base_over, **over)
+        res = run(case_path, out=Path(out) / "ablation" / label.replace(" ", "_"), progress=progress, overwrite=True, **base_over, **over)
         rows.append({"variant": label, **_stats(res)})
     df = pd.DataFrame(rows)
     for q in ("H", "L", "U"):

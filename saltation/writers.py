@@ -13,8 +13,78 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
+from .statistics import DISCARDED_JUMPS
+
 TRACK_COLUMNS = ("particle", "t", "x", "y", "z", "u", "v", "w", "spin_x", "spin_y", "spin_z")
-JUMP_COLUMNS = ("particle", "jump", "t_start", "length", "height", "duration", "velocity")
+JUMP_COLUMNS = ("particle", "jump", "t_start", "length", "height", "duration", "velocity", "discarded")
+
+# (unit, meaning) of every column a run directory's Parquet files hold: stored in each
+# file's schema (field metadata "unit", "description"), so a script reading the files
+# with pyarrow or pandas needs none of this code. Particle units: d, u*, d/u*.
+COLUMN_DOCS = {
+    "particle": ("1", "grain index, 0 … N-1"),
+    "t": ("d/u*", "time since the start of the run"),
+    "x": ("d", "streamwise position of the grain's centre, unwrapped (continuous across the periodic boundary)"),
+    "y": ("d", "height of the grain's centre above the bed top"),
+    "z": ("d", "spanwise position of the grain's centre, unwrapped"),
+    "u": ("u*", "streamwise velocity"), "v": ("u*", "wall-normal velocity"), "w": ("u*", "spanwise velocity"),
+    "spin_x": ("u*/d", "angular velocity, x component (world frame)"),
+    "spin_y": ("u*/d", "angular velocity, y component (world frame)"),
+    "spin_z": ("u*/d", "angular velocity, z component (world frame; < 0 is topspin for a grain moving +x)"),
+    "q0": ("1", "orientation quaternion body -> world, scalar part"),
+    "q1": ("1", "orientation quaternion, x part"), "q2": ("1", "orientation quaternion, y part"),
+    "q3": ("1", "orientation quaternion, z part"),
+    "class_id": ("1", "Zingg class of the grain (summary.json shape.class_ids)"),
+    "jump": ("1", "index of the grain's jump, from 0 (each grain's first jump starts at its release)"),
+    "t_start": ("d/u*", "time of the bed contact the jump started from"),
+    "length": ("d", "streamwise distance between the two bed contacts"),
+    "height": ("d", "highest elevation of the grain's bottom above the bed top during the jump"),
+    "duration": ("d/u*", "time between the two bed contacts (at least one step: saltation.jumps)"),
+    "velocity": ("u*", "mean streamwise grain velocity U = length / duration"),
+    "discarded": ("bool", f"one of the grain's first {DISCARDED_JUMPS} jumps (initial-condition memory, "
+                          "Moreno-Casas et al. 2022 §3.2): left out of summary.json's statistics"),
+    "collisions": ("1", "grain-grain collisions of this grain"),
+    "bed_impacts": ("1", "bed impacts of this grain (contacts, including those within one bed-contact episode)"),
+    "jumps": ("1", "jumps this grain completed"),
+    "max_overlap": ("d", "largest grain-grain contact overlap of this grain"),
+    "zingg_class": ("1", "Zingg class: disk, blade, rod or equant (Zingg 1935 thresholds 2/3)"),
+    "subtype": ("1", "equant sub-type of the seed construction (0 for other classes)"),
+    "Dl": ("d", "long axis of the grain"), "Di": ("d", "intermediate axis"), "Ds": ("d", "short axis"),
+    "n_spheres": ("1", "component spheres of the bonded-sphere grain"),
+    "volume": ("d^3", "volume of the bonded-sphere grain"),
+}
+
+
+def schema_with_docs(columns, dtypes, meta: dict | None = None) -> pa.Schema:
+    """Arrow schema whose fields carry their unit and meaning (COLUMN_DOCS) and whose file
+    metadata holds ``meta`` as JSON under the key "saltation"."""
+    fields = []
+    for c, d in zip(columns, dtypes):
+        unit, text = COLUMN_DOCS.get(c, ("", ""))
+        kind = d if isinstance(d, pa.DataType) else pa.from_numpy_dtype(np.dtype(d))
+        fields.append(pa.field(c, kind, metadata={"unit": unit, "description": text}))
+    return pa.schema(fields, metadata={"saltation": json.dumps(meta or {}, default=_json_default)})
+
+
+def run_metadata(case, kind: str) -> dict:
+    """What a reader of a run's Parquet file needs to turn it into SI units."""
+    from . import __version__
+
+    return {"file": kind, "saltation_version": __version__,
+            "units": "particle units: lengths in d, velocities in u*, times in d/u*",
+            "d_m": case.particle.diameter, "u_star_m_s": case.shear_velocity, "time_scale_s": case.time_scale,
+            "tau_star": case.shields_number, "tau_ratio": case.tau_ratio, "dt_particle": case.dt_particle,
+            "y_origin": "the bed top (the top of the bed grains)", "discarded_first_jumps": DISCARDED_JUMPS}
+
+
+def write_table(path: Path, frame, meta: dict | None = None) -> None:
+    """A pandas DataFrame → Parquet with the documented schema, written atomically."""
+    path = Path(path)
+    table = pa.Table.from_pandas(frame, preserve_index=False)
+    schema = schema_with_docs(table.column_names, [f.type for f in table.schema], meta)
+    tmp = path.with_name(path.name + ".tmp")
+    pq.write_table(table.cast(schema), tmp)
+    tmp.replace(path)
 
 
 class ParquetTableWriter:
@@ -27,9 +97,11 @@ class ParquetTableWriter:
     after that many parts (later ones, written after the checkpoint, are deleted).
     """
 
-    def __init__(self, path: Path, columns, dtypes, parts: Path | None = None, first_part: int = 0):
+    def __init__(self, path: Path, columns, dtypes, parts: Path | None = None, first_part: int = 0,
+                 meta: dict | None = None):
+        """meta: the run's description (units, scales) stored in the file's metadata."""
         self.path = Path(path)
-        self.schema = pa.schema([(c, pa.from_numpy_dtype(np.dtype(d))) for c, d in zip(columns, dtypes)])
+        self.schema = schema_with_docs(columns, dtypes, meta)
         self.parts = Path(parts) if parts is not None else None
         self.n_parts = int(first_part)
         if self.parts is None:
@@ -63,7 +135,8 @@ class ParquetTableWriter:
             return
         arrays = []
         for field in self.schema:
-            arrays.append(pa.array(np.concatenate([b[field.name] for b in self._pending]).astype(field.type.to_pandas_dtype())))
+            arrays.append(pa.array(np.concatenate([b[field.name] for b in self._pending]).astype(field.type.to_pandas_dtype()),
+                                   type=field.type))
         if self._writer is None:  # parts mode: open the next part lazily
             self._writer = pq.ParquetWriter(self.parts / f"{self.path.stem}-{self.n_parts:05d}.parquet", self.schema)
         self._writer.write_table(pa.Table.from_arrays(arrays, schema=self.schema))
@@ -103,8 +176,8 @@ class ParquetTableWriter:
 class TrackWriter(ParquetTableWriter):
     """tracks.parquet: particle, t, unwrapped x, y above the bed top, z, velocity, spin."""
 
-    def __init__(self, path, **parts):
-        super().__init__(path, TRACK_COLUMNS, ["int32"] + ["float64"] * 10, **parts)
+    def __init__(self, path, **kw):
+        super().__init__(path, TRACK_COLUMNS, ["int32"] + ["float64"] * 10, **kw)
 
     def write(self, t, particles, pos_unwrapped, vel, spin):
         n = len(particles)
@@ -132,8 +205,8 @@ class ClusterTrackWriter(ParquetTableWriter):
     q0..q3 (body → world, scalar first) and the grain's Zingg class id (summary.json
     ``shape.class_ids``)."""
 
-    def __init__(self, path, **parts):
-        super().__init__(path, CLUSTER_TRACK_COLUMNS, ["int32"] + ["float64"] * 14 + ["int8"], **parts)
+    def __init__(self, path, **kw):
+        super().__init__(path, CLUSTER_TRACK_COLUMNS, ["int32"] + ["float64"] * 14 + ["int8"], **kw)
 
     def write(self, t, particles, pos_unwrapped, vel, omega, quat, class_id):
         n = len(particles)
@@ -148,10 +221,31 @@ class ClusterTrackWriter(ParquetTableWriter):
 
 
 class JumpWriter(ParquetTableWriter):
-    """jumps.parquet: one row per jump (dimensionless: d, d/u*, u*)."""
+    """jumps.parquet: one row per jump (dimensionless: d, d/u*, u*); ``discarded`` marks
+    each grain's first DISCARDED_JUMPS jumps."""
 
-    def __init__(self, path, **parts):
-        super().__init__(path, JUMP_COLUMNS, ["int32", "int32"] + ["float64"] * 5, **parts)
+    def __init__(self, path, **kw):
+        super().__init__(path, JUMP_COLUMNS, ["int32", "int32"] + ["float64"] * 5 + ["bool"], **kw)
+
+    def collect(self, st, rows: list) -> None:
+        """Move the finished jumps out of the kernels' per-grain buffers (st.jump_buf,
+        jump_buf_n, jump_count of either grain family) into the file and into ``rows``
+        (particle, jump, length, height, velocity, duration: the summary's statistics)."""
+        nb = st.jump_buf_n
+        idx = np.nonzero(nb)[0]
+        if len(idx) == 0:
+            return
+        counts = nb[idx]
+        part = np.repeat(idx, counts)
+        data = np.concatenate([st.jump_buf[p, : nb[p]] for p in idx])
+        first = st.jump_count[idx] - counts  # index of the first buffered jump per grain
+        jidx = np.concatenate([np.arange(a, a + k) for a, k in zip(first, counts)])
+        length, height, duration = data[:, 1], data[:, 2], data[:, 3]
+        velocity = length / duration  # duration ≥ one step (saltation.jumps)
+        self.append(particle=part.astype(np.int32), jump=jidx.astype(np.int32), t_start=data[:, 0], length=length,
+                    height=height, duration=duration, velocity=velocity, discarded=jidx < DISCARDED_JUMPS)
+        rows.append(np.column_stack([part, jidx, length, height, velocity, duration]))
+        nb[idx] = 0
 
 
 class ParaViewWriter:

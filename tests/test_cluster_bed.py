@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from flowfields import profile_dataset
+from saltation.bed import bed_parameters
 from saltation import cluster_bed, clusters, history, shapes
 from saltation.forces import make_coefficients
 from saltation.packed_bed import make_packed_bed
@@ -58,7 +59,7 @@ def test_sphere_rebounds_elastically_along_the_real_normal(offset):
     v = np.array([0.3, -2.0, 0.1])
     start = np.array([c[0] + offset, 1.2, c[2]])
     st, w = _setup([_unit_sphere()], [start], [v])
-    bed = np.array([1.0, 0.0, math.radians(30.0), clusters.BED_PACKED])
+    bed = bed_parameters(1.0, 0.0, math.radians(30.0), model=clusters.BED_PACKED)
     hits = _run(st, w, _vacuum(False), bed, pb, 80)
     assert hits == 1
     # the hit: the first bed sphere the line meets, |start + s v − c| = 1 (reach ½ + ½)
@@ -96,7 +97,7 @@ def test_dropped_composites_never_overlap_the_bed_and_create_no_energy():
     q /= np.linalg.norm(q, axis=1)[:, None]
     st, w = _setup(comps, pos, vel, quat=q, omega=rng.normal(size=(n, 3)))
     pb = make_packed_bed(16.0, 8.0, cluster_bed.cut_for(st))
-    bed = np.array([0.6, 0.5, math.radians(30.0), clusters.BED_PACKED])
+    bed = bed_parameters(0.6, 0.5, math.radians(30.0), model=clusters.BED_PACKED)
     g_eff = st.volume / TAU_STAR / st.mass  # submerged weight / rigid mass (Cm = 0)
 
     def energy():
@@ -133,7 +134,7 @@ def test_dropped_composites_never_overlap_the_bed_and_create_no_energy():
 
 
 def test_mixture_run_on_the_packed_bed(tmp_path):
-    from saltation.run import run
+    from saltation.simulation import run
 
     case = {"particle": {"diameter": 0.69e-3, "shape": "mixture"},
             "flow": {"source": "les", "tau_ratio": 2.43},

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from flowfields import profile_dataset
+from saltation.bed import bed_parameters
 from saltation import cluster_contacts as ccm
 from saltation import clusters, history, shapes
 from saltation.contacts import advance_granular, make_contact_list, make_contact_model
@@ -37,7 +38,7 @@ def _state(comps, pos, vel, quat=None, omega=None):
 def _run(st, w, cc, n_sub, steps, dt=DT, record=None):
     still = profile_dataset("still", y_top_plus=1e6)
     hc = history.make_history_coefficients(dt, NW)
-    bed = np.array([0.65, 0.1, 0.5])
+    bed = bed_parameters(0.65, 0.1, 0.5)
     timers = np.zeros(2)
     for s in range(steps):
         _, cc = ccm.advance_clusters_contacts(still.arrays, _vacuum(), bed, 0, st, w, hc, s * dt, dt, 1, 1e9, cc,
@@ -200,7 +201,7 @@ def test_dense_mixture_run_on_the_les_keeps_overlaps_small(tmp_path):
     happen, component overlaps stay ≲ a few % of Dn, the per-grain counts add up."""
     import pandas as pd
 
-    from saltation.run import run
+    from saltation.simulation import run
 
     case = {"particle": {"diameter": 0.69e-3, "shape": "mixture"},
             "flow": {"source": "les", "tau_ratio": 1.79},

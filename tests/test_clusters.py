@@ -7,12 +7,13 @@ import numpy as np
 import pytest
 
 from flowfields import open_dataset, profile_dataset
+from saltation.bed import bed_parameters
 from saltation import clusters, history, integrator, shapes
 from saltation.forces import make_coefficients
 
 DT = 0.01
 NW = 10
-BED = np.array([0.65, 0.1, math.radians(30.0)])
+BED = bed_parameters(0.65, 0.1, math.radians(30.0))
 
 
 def _cluster(comps, pos, vel, omega, coef, quat=None, spin_drag=True):

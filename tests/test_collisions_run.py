@@ -8,12 +8,13 @@ import math
 import numpy as np
 import pytest
 
+from saltation.bed import bed_parameters
 from saltation import contacts as K
 from saltation.collide import empty_substep_set, make_bed_context, make_contact_phase, soft_contact_phase
 from saltation.integrator import make_state
 from saltation.packed_bed import BED_CENTRE_Y, hexagonal_layer, make_packed_bed, packed_bed_check_particle
 from saltation.integrator import make_workspace
-from saltation.run import run
+from saltation.simulation import run
 
 D = 0.69e-3
 
@@ -184,7 +185,7 @@ def drop_on_bed(offset_x, offset_z=0.0, speed=3.0, e=1.0, f=0.0):
     ws = make_workspace(1)
     ws.x0[0, :3] = pos - vel * dt
     last = np.full(1, -2, np.int64)
-    hits = packed_bed_check_particle(st, ws, 0, 0.0, dt, 10, np.array([e, f, 0.5]), pb, last)
+    hits = packed_bed_check_particle(st, ws, 0, 0.0, dt, 10, bed_parameters(e, f, 0.5), pb, last)
     return hits, st, (x_hit - c), pb
 
 

@@ -4,11 +4,12 @@ import pytest
 from scipy.optimize import brentq
 
 from flowfields.dataset import in_memory_dataset
+from saltation.bed import bed_parameters
 from saltation import history
 from saltation.config import load_case
 from saltation.forces import make_coefficients, yen_drag_coefficient
 from saltation.integrator import NOT_FINITE, advance, make_state, make_workspace
-from saltation.run import Simulation, SimulationError, run
+from saltation.simulation import Simulation, SimulationError, run
 
 
 def uniform_flow(u=(0.0, 0.0, 0.0), y_top=1e6):
@@ -160,7 +161,7 @@ def test_spin_law_off_keeps_the_spin_and_the_velocity_only_sample_moves_the_grai
 def test_spin_key_reaches_the_kernel(tmp_path):
     from saltation.config import resolve_domain
     from saltation.forces import ON_SPIN
-    from saltation.run import _les_box_m, open_flow
+    from saltation.simulation import _les_box_m, open_flow
 
     assert load_case("cases/default.toml").forces.spin is True
     for value in (True, False):
@@ -199,7 +200,7 @@ def test_weight_and_drag_fast_path_matches_the_general_body_to_round_off():
         hc = history.make_history_coefficients(0.02, 10)
         done = 0
         while done < 400:
-            done += advance(ds.arrays, coef, np.array([0.65, 0.1, 0.5]), 7, st, ws, hc, done * 0.02, 0.02,
+            done += advance(ds.arrays, coef, bed_parameters(0.65, 0.1, 0.5), 7, st, ws, hc, done * 0.02, 0.02,
                             400 - done, 1e300)
             st.jump_buf_n[:] = 0
         out.append(st)

@@ -8,7 +8,7 @@ import pytest
 
 from saltation.analysis.transport import ackers_white, einstein_number, transport_rate
 from saltation.config import CaseError, load_case
-from saltation.run import Simulation, open_flow, resolve_domain, _les_box_m, run
+from saltation.simulation import Simulation, open_flow, resolve_domain, _les_box_m, run
 from saltation.shapes import CLASSES
 
 D = 0.69e-3

@@ -1,6 +1,7 @@
 """The progress bar: a terminal gets redraws, a log file gets a line every 30 s at most."""
 import io
 import sys
+import time
 
 from saltation.progress import LOG_INTERVAL, progress_bar
 
@@ -33,3 +34,27 @@ def test_disabled_bar_writes_nothing(monkeypatch):
         bar.update(1)
     bar.close()
     assert log.getvalue() == ""
+
+
+def test_compile_notice_speaks_once_per_cache_and_quotes_the_wait(tmp_path, monkeypatch, capsys):
+    """A cold cache: a notice with the expected time before the compile, heartbeats while it
+    lasts, the measured time after; a warm one (marker written): silence."""
+    import numba
+
+    from saltation import progress
+
+    monkeypatch.setattr(numba.config, "CACHE_DIR", str(tmp_path / "cache"))
+    monkeypatch.setattr(progress, "COMPILE_HEARTBEAT_S", 0.05)
+    with progress.compile_notice(True, "spheres"):
+        time.sleep(0.2)
+    err = capsys.readouterr().err
+    assert "compiling the spheres kernels, once per installation" in err
+    assert f"~{progress.COMPILE_ESTIMATE_S['spheres']:.0f} s" in err
+    assert "still compiling" in err and "kernels compiled in" in err
+    assert (tmp_path / "cache" / "compiled-spheres.json").exists()
+    with progress.compile_notice(True, "spheres"):
+        pass
+    assert capsys.readouterr().err == ""
+    with progress.compile_notice(False, "composites"):  # --quiet: nothing, and no marker
+        pass
+    assert capsys.readouterr().err == "" and not (tmp_path / "cache" / "compiled-composites.json").exists()

@@ -9,7 +9,7 @@ import pandas as pd
 import pytest
 
 from saltation.cli import main
-from saltation.run import CHECKPOINT, RunInterrupted, Simulation, _les_box_m, open_flow
+from saltation.simulation import CHECKPOINT, RunInterrupted, Simulation, _les_box_m, open_flow
 from saltation.config import load_case, resolve_domain
 from saltation.sweep import SweepError, case_name, load_sweep, plan_workers, run_sweep, sweep_key
 

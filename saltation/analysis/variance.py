@@ -216,7 +216,6 @@ class RunVariance:
     feeds the unwrapped positions. ``save``/``load`` carry the sums across a checkpoint.
     """
 
-    STATE_FILE = "variance.state.npz"
 
     def __init__(self, n_particles: int, n_steps: int, every: int, dt: float, n_origins: int = N_ORIGINS):
         self.every = int(every)
@@ -240,22 +239,15 @@ class RunVariance:
                 "lags": len(p.lags), "max_lag_particle": p.max_lag_time, "groups": self.acc.n_groups,
                 "memory_bytes": self.acc.memory_bytes}
 
-    def save(self, path, step: int) -> None:
-        tmp = Path(path).with_suffix(".tmp.npz")
-        np.savez(tmp, ref=self.acc.ref, sums=self.acc.sums, step=np.int64(step),
-                 last_sample=np.int64(self.acc.last_sample))
-        tmp.replace(path)
+    def state_arrays(self) -> dict:
+        """The sums so far, for the run's checkpoint (simulation.py)."""
+        return {"ref": self.acc.ref, "sums": self.acc.sums, "last_sample": np.int64(self.acc.last_sample)}
 
-    def load(self, path, step: int) -> bool:
-        """Restore the sums saved at ``step``; False (nothing restored) if the file is
-        missing or from another step or plan."""
-        path = Path(path)
-        if not path.exists():
-            return False
-        with np.load(path) as z:
-            if int(z["step"]) != step or z["sums"].shape != self.acc.sums.shape:
-                return False
-            self.acc.ref[...] = z["ref"]
-            self.acc.sums[...] = z["sums"]
-            self.acc.last_sample = int(z["last_sample"])
-        return True
+    def restore(self, arrays: dict, step: int) -> None:
+        """The sums of a checkpoint taken at ``step`` (state_arrays)."""
+        if arrays["sums"].shape != self.acc.sums.shape:
+            raise AnalysisError(f"the checkpoint's variance sums have shape {arrays['sums'].shape}, "
+                                f"this run's plan {self.acc.sums.shape}")
+        self.acc.ref[...] = arrays["ref"]
+        self.acc.sums[...] = arrays["sums"]
+        self.acc.last_sample = int(arrays["last_sample"])

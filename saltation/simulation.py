@@ -6,6 +6,7 @@ the kernels (integrator.py and the sub-model modules it calls).
 """
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import os
@@ -21,17 +22,18 @@ import numpy as np
 import pandas as pd
 
 from . import history
-from .bed import coefficient_set
+from .bed import run_bed_parameters
 from .config import Case, dump_toml, load_case, resolve_domain
 from .forces import make_coefficients
 from .initial import initial_conditions, initial_conditions_apart
 from .integrator import NOT_FINITE, make_state, make_workspace
+from .statistics import DISCARDED_JUMPS, empty_rows, jump_statistics  # noqa: F401  (DISCARDED_JUMPS: re-exported)
 from .stepping import Stepper
-from .writers import JumpWriter, ParaViewWriter, TrackWriter, write_json
+from .progress import compile_notice
+from .writers import JumpWriter, ParaViewWriter, TrackWriter, run_metadata, write_json, write_table
 
 VARIANCE_FILE = "variance.parquet"  # displacement variances for the diffusion exponents
 
-DISCARDED_JUMPS = 10  # each grain's first jumps carry initial-condition memory (paper §3.2)
 
 
 class SimulationError(RuntimeError):
@@ -58,10 +60,13 @@ class RunInterrupted(KeyboardInterrupt):
 CHECKPOINT = "checkpoint.npz"
 PARTS = ".parts"  # checkpointable Parquet parts, merged into jumps/tracks.parquet at the end
 CHUNK_STEPS = 200  # longest stretch between two chunk ends (how soon a signal is honoured)
+# besides every output.checkpoint_every s of wall time: a checkpoint each time the run has
+# advanced by this fraction of its steps, so a kill -9 loses at most 5 % of a run
+CHECKPOINT_FRACTION = 0.05
 # the fluid seen at each grain is carried from one step to the next (integrator.Workspace)
 FLUID_FIELDS = ("uf", "grad", "dudt", "vort", "uf_top", "uf_bot")
 _NOT_THE_RUN = {("output", "checkpoint_every"), ("output", "checkpoint_steps"), ("output", "directory"),
-                ("run", "threads")}
+                ("output", "variance"), ("run", "threads")}
 
 
 def _case_keys(case: Case) -> dict:
@@ -105,22 +110,27 @@ def _les_box_m(ds, case: Case):
     return (lx * visc_len, lz * visc_len, ds.re_tau * visc_len)
 
 
-def run(case, out=None, progress=True, resume=False, **overrides) -> RunResult:
+def run(case, out=None, progress=True, resume=False, overwrite=False, **overrides) -> RunResult:
     """Run one case (a path or a dict of tables); overrides use "table.key" names.
 
     Writes config.toml, summary.json, jumps.parquet, tracks.parquet, particles.pvd and
-    returns a RunResult (.summary, .jumps, .tracks). ``resume=True`` continues from the
-    run directory's checkpoint (same case; the result is that of an uninterrupted run).
+    returns a RunResult (.summary, .jumps, .tracks). A run directory that already holds
+    files is refused unless ``resume=True`` (continue from its checkpoint: same case, the
+    result is that of an uninterrupted run) or ``overwrite=True`` (replace the run's
+    outputs); it is locked while the run writes (run_directory.py).
     SIGINT/SIGTERM write a checkpoint and raise :class:`RunInterrupted`."""
-    case = load_case(case, overrides or None) if not isinstance(case, Case) else case
-    ds = open_flow(case)
-    case = resolve_domain(case, _les_box_m(ds, case) if case.flow.source == "les" else None)
-    out = Path(out or case.output.directory or Path("runs") / (case.run.name or "run"))
-    if case.particle.shape != "sphere":  # bonded-sphere grains (issue 6): run_clusters.py
-        from .run_clusters import ClusterSimulation
+    from .run_directory import claim_run_directory
 
-        return ClusterSimulation(case, ds, out, progress=progress, resume=resume).run()
-    return Simulation(case, ds, out, progress=progress, resume=resume).run()
+    case = load_case(case, overrides or None) if not isinstance(case, Case) else case
+    out = Path(out or case.output.directory or Path("runs") / (case.run.name or "run"))
+    with claim_run_directory(out, resume=resume, overwrite=overwrite, checkpoint=CHECKPOINT):
+        ds = open_flow(case)
+        case = resolve_domain(case, _les_box_m(ds, case) if case.flow.source == "les" else None)
+        if case.particle.shape != "sphere":  # bonded-sphere grains (issue 6): run_clusters.py
+            from .run_clusters import ClusterSimulation
+
+            return ClusterSimulation(case, ds, out, progress=progress, resume=resume).run()
+        return Simulation(case, ds, out, progress=progress, resume=resume).run()
 
 
 class Simulation:
@@ -136,6 +146,8 @@ class Simulation:
         self.resume = resume
         self.stop_after_steps = stop_after_steps
         self._signal = None
+        self._writing = False  # a checkpoint or the final outputs are being written
+        self._second_signal = False  # a signal came while writing: stop once it is done
         self.n = int(case.n_particles)
         d = case.particle.diameter
         lx, lz, _ = case.domain
@@ -161,7 +173,7 @@ class Simulation:
             basset=f.basset,
             spin=f.spin,
         )
-        self.bed = np.array([case.bed_restitution, case.bed_friction, case.bed.max_tilt_radians])
+        self.bed = run_bed_parameters(case, self.coef, self.dt)
         self.n_window = f.basset_window
         self.hist_coef = history.make_history_coefficients(self.dt, self.n_window)
         self.top_d = float(flow.y[-1]) / self.re_star
@@ -187,24 +199,6 @@ class Simulation:
         pos, vel, spin = start(self.n, self.domain_d, c.run.seed, c.run.release_height)
         return make_state(pos, vel, spin, 0.0, self.n_window)
 
-    def _collect_jumps(self, st, writer: JumpWriter, rows: list):
-        nb = st.jump_buf_n
-        idx = np.nonzero(nb)[0]
-        if len(idx) == 0:
-            return
-        counts = nb[idx]
-        part = np.repeat(idx, counts)
-        data = np.concatenate([st.jump_buf[p, : nb[p]] for p in idx])
-        first = st.jump_count[idx] - counts  # index of the first buffered jump per grain
-        jidx = np.concatenate([np.arange(a, a + k) for a, k in zip(first, counts)])
-        length, height, duration = data[:, 1], data[:, 2], data[:, 3]
-        velocity = np.divide(length, duration, out=np.zeros_like(length), where=duration > 0)
-        writer.append(
-            particle=part.astype(np.int32), jump=jidx.astype(np.int32), t_start=data[:, 0],
-            length=length, height=height, duration=duration, velocity=velocity,
-        )
-        rows.append(np.column_stack([part, jidx, length, height, velocity]))
-        nb[idx] = 0
 
     def _fail(self, st, step_base, steps_done):
         p = int(np.nonzero(st.status == NOT_FINITE)[0][0])
@@ -241,18 +235,22 @@ class Simulation:
         f = self.flow.arrays
         d, ts = c.particle.diameter, c.time_scale
         parts = self.out / PARTS
-        jw = JumpWriter(self.out / "jumps.parquet", parts=parts, first_part=meta.get("jump_parts", 0))
-        tw = TrackWriter(self.out / "tracks.parquet", parts=parts, first_part=meta.get("track_parts", 0)) if c.output.tracks else None
+        jw = JumpWriter(self.out / "jumps.parquet", parts=parts, first_part=meta.get("jump_parts", 0),
+                        meta=run_metadata(c, "jumps"))
+        tw = (TrackWriter(self.out / "tracks.parquet", parts=parts, first_part=meta.get("track_parts", 0),
+                          meta=run_metadata(c, "tracks")) if c.output.tracks else None)
         vw = None
         if c.output.vtk:
             vw = ParaViewWriter(self.out, d, frames=meta.get("vtk_frames"))
         track_every = c.tracks_every
         vtk_every = c.vtk_every
-        every = [e for e, w in ((track_every, tw), (vtk_every, vw)) if w is not None] + [CHUNK_STEPS]
+        every_progress = max(1, math.ceil(CHECKPOINT_FRACTION * self.n_steps))  # chunk ends at every 5 %
+        every = [e for e, w in ((track_every, tw), (vtk_every, vw)) if w is not None] + [CHUNK_STEPS, every_progress]
         var = self._variance(resume_step=meta["step"] if ckpt else None)  # diffusion statistics (SPEC §6)
         wall0 = time.perf_counter() - meta.get("wall_s", 0.0)
         t_compile = time.perf_counter()
-        self.stepper.advance(f, st, ws, 0.0, 0, 0)  # compiles (zero steps)
+        with compile_notice(self.progress):
+            self.stepper.advance(f, st, ws, 0.0, 0, 0)  # compiles (zero steps)
         compile_s = time.perf_counter() - t_compile + meta.get("compile_s", 0.0)
         kernel_s = meta.get("kernel_s", 0.0)
         status = "completed"
@@ -271,9 +269,8 @@ class Simulation:
 
         def checkpoint():
             times = {"wall_s": time.perf_counter() - wall0, "compile_s": compile_s, "kernel_s": kernel_s}
-            self._write_checkpoint(st, ws, rows, step, jw, tw, vw, times)
-            if var is not None:
-                var.save(self.out / var.STATE_FILE, step)
+            with self._uninterruptible():
+                self._write_checkpoint(st, ws, rows, step, jw, tw, vw, var, times)
 
         last_ckpt_wall, last_ckpt_step = time.perf_counter(), step
         every_s, every_steps = c.output.checkpoint_every, c.output.checkpoint_steps
@@ -288,7 +285,7 @@ class Simulation:
                 want = nxt - step
                 done = self.stepper.advance(f, st, ws, step * self.dt, want, step)
                 kernel_s += time.perf_counter() - t0
-                self._collect_jumps(st, jw, rows)
+                jw.collect(st, rows)
                 if np.any(st.status == NOT_FINITE):
                     status = "failed"
                     self._fail(st, step, done)
@@ -306,6 +303,7 @@ class Simulation:
                 if step < self.n_steps and (
                     (every_s > 0 and time.perf_counter() - last_ckpt_wall >= every_s)
                     or (every_steps > 0 and step // every_steps > last_ckpt_step // every_steps)
+                    or step // every_progress > last_ckpt_step // every_progress
                 ):
                     checkpoint()
                     last_ckpt_wall, last_ckpt_step = time.perf_counter(), step
@@ -313,29 +311,31 @@ class Simulation:
             status = "interrupted"
             raise
         finally:
-            self._restore_signals(old_handlers)
-            bar.close()
-            jw.close()
-            if tw is not None:
-                tw.close()
-            if vw is not None:
-                vw.close()
-            wall = time.perf_counter() - wall0
-            summary = self._summary(st, rows, step, wall, compile_s, kernel_s, threads, status)
-            if var is not None:
-                var.write(self.out / VARIANCE_FILE)
-                summary["variance"] = var.summary()
+            self._writing = True  # the outputs below are written whole even on a second Ctrl-C
+            try:
+                bar.close()
+                jw.close()
+                if tw is not None:
+                    tw.close()
+                if vw is not None:
+                    vw.close()
+                wall = time.perf_counter() - wall0
+                summary = self._summary(st, rows, step, wall, compile_s, kernel_s, threads, status)
+                if var is not None:
+                    var.write(self.out / VARIANCE_FILE)
+                    summary["variance"] = var.summary()
+                if ckpt is not None:
+                    summary["resumed_from_step"] = meta["step"]
                 if status == "completed":
-                    (self.out / var.STATE_FILE).unlink(missing_ok=True)
-            if ckpt is not None:
-                summary["resumed_from_step"] = meta["step"]
-            if status == "completed":
-                (self.out / CHECKPOINT).unlink(missing_ok=True)
-                shutil.rmtree(self.out / PARTS, ignore_errors=True)
-            elif status == "interrupted" and (self.out / CHECKPOINT).exists():
-                summary["checkpoint"] = {"file": CHECKPOINT, "step": self._checkpoint_step}
-            write_json(self.out / "summary.json", summary)
-            self._write_particles(st)
+                    (self.out / CHECKPOINT).unlink(missing_ok=True)
+                    shutil.rmtree(self.out / PARTS, ignore_errors=True)
+                elif status == "interrupted" and (self.out / CHECKPOINT).exists():
+                    summary["checkpoint"] = {"file": CHECKPOINT, "step": self._checkpoint_step}
+                write_json(self.out / "summary.json", summary)
+                self._write_particles(st)
+            finally:
+                self._writing = False
+                self._restore_signals(old_handlers)
         result = RunResult(self.out, summary)
         if status == "interrupted":
             raise RunInterrupted(result, int(self._signal))
@@ -344,8 +344,8 @@ class Simulation:
     def _variance(self, resume_step=None):
         """The displacement-variance accumulator (analysis/variance.py), or None when
         output.variance is off or there are fewer than 2 grains. On resume its sums come
-        from the state saved with the checkpoint; without them it is off (a partial sum
-        would be wrong) and the old variance.parquet is removed."""
+        from the checkpoint (one file with the state: they cannot be lost apart from it);
+        a checkpoint written without them (output.variance was off) cannot switch it on."""
         from .analysis.variance import AnalysisError, RunVariance
 
         c = self.case
@@ -353,15 +353,22 @@ class Simulation:
             if not c.output.variance or self.n < 2:
                 raise AnalysisError("off")
             var = RunVariance(self.n, self.n_steps, c.variance_every, self.dt, c.output.variance_origins)
-            if resume_step is not None and not var.load(self.out / var.STATE_FILE, resume_step):
-                raise AnalysisError("no saved sums")
         except AnalysisError:  # off, too few grains, or a run too short for any lag
             (self.out / VARIANCE_FILE).unlink(missing_ok=True)
             return None
+        if resume_step is not None:
+            saved = self._variance_arrays or {}
+            if not saved:
+                raise SimulationError(
+                    f"cannot resume {self.out} with output.variance = true: its checkpoint was written without the "
+                    "displacement variances (output.variance was false), so variance.parquet would miss the first "
+                    f"{resume_step} steps; resume with --set output.variance=false, or rerun with --overwrite")
+            var.restore(saved, resume_step)
         return var
 
     # ------------------------------------------------------------------ checkpoints
     _checkpoint_step = None
+    _variance_arrays = None
 
     def _catch_signals(self):
         """SIGINT/SIGTERM → stop at the next chunk end with a checkpoint; a second signal
@@ -371,26 +378,43 @@ class Simulation:
             return None
 
         def handler(signum, frame):
-            if self._signal is not None:
+            if self._signal is None:
+                self._signal = signum
+            elif self._writing:  # a checkpoint or the final outputs: finish them first
+                self._second_signal = True
+            else:
                 raise KeyboardInterrupt
-            self._signal = signum
 
         return {s: signal.signal(s, handler) for s in (signal.SIGINT, signal.SIGTERM)}
+
+    @contextlib.contextmanager
+    def _uninterruptible(self):
+        """A second SIGINT/SIGTERM while the checkpoint is written waits for it to be
+        complete (the first one already stops the run at this chunk end)."""
+        self._writing = True
+        try:
+            yield
+        finally:
+            self._writing = False
+        if self._second_signal:
+            raise KeyboardInterrupt
 
     @staticmethod
     def _restore_signals(old):
         for s, h in (old or {}).items():
             signal.signal(s, h)
 
-    def _write_checkpoint(self, st, ws, rows, step, jw, tw, vw, times):
+    def _write_checkpoint(self, st, ws, rows, step, jw, tw, vw, var, times):
         """Everything the loop needs to go on bit for bit, written atomically (tmp + rename)
         after the Parquet parts it counts are closed."""
         arrays = {f"state.{k}": v for k, v in st._asdict().items()}
         arrays.update({f"fluid.{k}": getattr(ws, k) for k in FLUID_FIELDS})
-        arrays["jump_rows"] = np.concatenate(rows) if rows else np.zeros((0, 5))
+        arrays["jump_rows"] = np.concatenate(rows) if rows else empty_rows()
         arrays.update({f"stepper.{k}": v for k, v in self.stepper.state_arrays().items()})
+        if var is not None:
+            arrays.update({f"variance.{k}": v for k, v in var.state_arrays().items()})
         meta = {
-            "format": 1,
+            "format": 2,
             "step": int(step),
             "n_particles": self.n,
             "case": _case_keys(self.case),
@@ -420,9 +444,16 @@ class Simulation:
             if done.exists():
                 why = f' (summary.json says status "{json.loads(done.read_text()).get("status")}")'
             raise SimulationError(f"cannot resume: no checkpoint {path}{why}; run without --resume to start afresh")
-        with np.load(path) as z:
-            data = {k: z[k] for k in z.files}
-        meta = json.loads(bytes(data.pop("meta")).decode())
+        try:
+            with np.load(path) as z:
+                data = {k: z[k] for k in z.files}
+            meta = json.loads(bytes(data.pop("meta")).decode())
+            if meta.get("format") != 2:
+                raise ValueError(f"format {meta.get('format')!r}, this version reads format 2")
+        except Exception as exc:  # truncated, corrupt or from another version
+            raise SimulationError(
+                f"cannot resume: the checkpoint {path} is damaged or unreadable ({type(exc).__name__}: {exc}); "
+                f"rerun with --overwrite to start {self.out} afresh") from None
         now = _case_keys(self.case)
         changed = sorted(k for k in set(now) | set(meta["case"])
                          if json.dumps(now.get(k), default=str) != json.dumps(meta["case"].get(k), default=str))
@@ -437,39 +468,30 @@ class Simulation:
             getattr(ws, k)[...] = data[f"fluid.{k}"]
         rows = [data["jump_rows"]] if len(data["jump_rows"]) else []
         self._stepper_arrays = {k[len("stepper."):]: v for k, v in data.items() if k.startswith("stepper.")}
+        self._variance_arrays = {k[len("variance."):]: v for k, v in data.items() if k.startswith("variance.")}
         return meta, st, ws, rows
 
     def _write_particles(self, st):
-        """particles.parquet: one row per grain — grain–grain collisions, bed impacts,
-        completed jumps, largest contact overlap (d)."""
+        """particles.parquet: one row per grain — its state at the end (position, x and z
+        unwrapped, velocity, spin), grain–grain collisions, bed impacts, completed jumps,
+        largest contact overlap (d)."""
         table = pd.DataFrame({
             "particle": np.arange(self.n, dtype=np.int32),
+            **{k: st.pos[:, i].copy() for i, k in enumerate("xyz")},
+            **{k: st.vel[:, i].copy() for i, k in enumerate("uvw")},
+            **{f"spin_{k}": st.spin[:, i].copy() for i, k in enumerate("xyz")},
             "collisions": self.stepper.per_particle_collisions(),
             "bed_impacts": st.impacts.copy(),
             "jumps": st.jump_count.copy(),
             "max_overlap": (self.stepper.cl.max_overlap.copy() if len(self.stepper.cl.max_overlap) == self.n
                             else np.zeros(self.n)),
         })
-        table.to_parquet(self.out / "particles.parquet", index=False)
+        write_table(self.out / "particles.parquet", table, run_metadata(self.case, "particles"))
 
     # ------------------------------------------------------------------ summary
     def _summary(self, st, rows, steps, wall, compile_s, kernel_s, threads, status):
         c = self.case
-        jumps = np.concatenate(rows) if rows else np.zeros((0, 5))
-        counted = jumps[jumps[:, 1] >= DISCARDED_JUMPS] if len(jumps) else jumps
-        # by (particle, jump): the statistics do not depend on when jumps were collected
-        counted = counted[np.lexsort((counted[:, 1], counted[:, 0]))]
-
-        def stat(col):
-            if len(counted) == 0:
-                return None, None
-            v = counted[:, col]
-            return float(v.mean()), float(v.std(ddof=1)) if len(v) > 1 else 0.0
-
-        h, hs = stat(3)
-        l, ls = stat(2)
-        u, us = stat(4)
-        bed_impacts = int(st.impacts.sum())
+        jumps = np.concatenate(rows) if rows else empty_rows()
         particle_steps = self.n * steps
         duration_p = steps * self.dt
         return {
@@ -488,13 +510,7 @@ class Simulation:
             "steps": steps,
             "simulated_time_particle": duration_p,
             "simulated_time_s": duration_p * c.time_scale,
-            "jumps": {
-                "count": int(len(counted)),
-                "recorded": int(len(jumps)),
-                "discarded_first_per_particle": DISCARDED_JUMPS,
-                "H_mean": h, "H_std": hs, "L_mean": l, "L_std": ls, "U_mean": u, "U_std": us,
-                "units": "H, L in d; U in u*",
-            },
+            "jumps": jump_statistics(jumps),
             "collisions": self.stepper.collisions_summary(st, duration_p),
             "steps_above_flow_top": int(st.above_top.sum()),
             "timing": {
