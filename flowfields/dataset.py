@@ -26,6 +26,13 @@ from .sampler import ABOVE_TOP, BELOW_WALL, FlowArrays, sample_many, sample_velo
 FORMAT_VERSION = 1
 SHIPPED_DATASET = Path(__file__).resolve().parent / "data" / "channel395"
 _REQUIRED_META = ("format_version", "re_tau", "times_plus", "storage", "provenance")
+_META_DOC = {
+    "format_version": f"the integer {FORMAT_VERSION}",
+    "re_tau": "a positive finite number: the friction Reynolds number u_tau h/nu of the LES",
+    "times_plus": "a non-empty list of finite numbers: the snapshot times in t+",
+    "storage": 'an object {"dtype": "float32" or "int16", "scale": [3 numbers], "offset": [3 numbers]}',
+    "provenance": "an object: who made the data, and how",
+}
 
 
 class DatasetError(ValueError):
@@ -239,6 +246,13 @@ def write_dataset(path, x, y, z, u_plus, re_tau, times_plus, provenance, dtype="
 
 
 def _validate_grid(x, y, z, times, shape, where):
+    for name, a in (("x", x), ("y", y), ("z", z)):
+        if np.ndim(a) != 1:
+            raise DatasetError(f"{where}: {name} cell centres must be a 1-D array, got shape {np.shape(a)}")
+        if not np.issubdtype(np.asarray(a).dtype, np.number) or not np.all(np.isfinite(a)):
+            raise DatasetError(f"{where}: {name} cell centres must be finite numbers")
+    if len(shape) != 5:
+        raise DatasetError(f"{where}: velocity array must have 5 dimensions (nt, nx, ny, nz, 3), got shape {tuple(shape)}")
     nt, nx, ny, nz, nc = shape
     if nc != 3 or (nx, ny, nz) != (len(x), len(y), len(z)) or nt != len(times):
         raise DatasetError(
@@ -258,6 +272,61 @@ def _validate_grid(x, y, z, times, shape, where):
             raise DatasetError(f"{where}: snapshot times are not uniformly spaced (intervals {d.min():.6g}–{d.max():.6g} t⁺)")
 
 
+def _is_number(v) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+
+def _validate_meta(meta, meta_file: Path) -> None:
+    """Types and ranges of every meta.json key the code reads: DatasetError naming the
+    file, the key, the bad value and what it must be."""
+    fix = ("; fix the file, or write the dataset again with 'saltation flow import' / 'flow generate'")
+
+    def bad(key, value, must):
+        return DatasetError(f"{meta_file}: {key} = {json.dumps(value, default=str)} is not allowed: "
+                            f"it must be {must}{fix}")
+
+    if not isinstance(meta, dict):
+        raise DatasetError(f"{meta_file}: must hold a JSON object (keys {', '.join(_REQUIRED_META)}), "
+                           f"got {type(meta).__name__}{fix}")
+    missing = [k for k in _REQUIRED_META if k not in meta]
+    if missing:
+        raise DatasetError(f"{meta_file}: missing metadata " + "; ".join(f"{k} ({_META_DOC[k]})" for k in missing) + fix)
+    v = meta["format_version"]
+    if not _is_number(v) or v != FORMAT_VERSION:
+        newer = " (a newer saltation wrote it?)" if _is_number(v) and v > FORMAT_VERSION else ""
+        raise bad("format_version", v, f"{FORMAT_VERSION}, the format this saltation reads{newer}")
+    v = meta["re_tau"]
+    if not _is_number(v) or not np.isfinite(v) or v <= 0:
+        raise bad("re_tau", v, _META_DOC["re_tau"])
+    t = meta["times_plus"]
+    if (not isinstance(t, list) or not t or not all(_is_number(x) and np.isfinite(x) for x in t)):
+        shown = t if not isinstance(t, list) or len(t) <= 4 else [*t[:4], "..."]
+        raise bad("times_plus", shown, _META_DOC["times_plus"])
+    st = meta["storage"]
+    if not isinstance(st, dict):
+        raise bad("storage", st, _META_DOC["storage"])
+    if st.get("dtype") not in ("float32", "int16"):
+        raise bad("storage.dtype", st.get("dtype"), '"float32" or "int16"')
+    for key, positive in (("scale", True), ("offset", False)):
+        a = st.get(key)
+        if (not isinstance(a, list) or len(a) != 3 or not all(_is_number(x) and np.isfinite(x) for x in a)
+                or (positive and not all(x > 0 for x in a))):
+            raise bad(f"storage.{key}", a, f"a list of three {'positive ' if positive else ''}finite numbers "
+                      f"(u+ = stored value * scale + offset, per component)")
+    if not isinstance(meta["provenance"], dict):
+        raise bad("provenance", meta["provenance"], _META_DOC["provenance"])
+    if "box_plus" in meta:
+        b = meta["box_plus"]
+        if not isinstance(b, list) or len(b) != 3 or not all(_is_number(x) and np.isfinite(x) and x > 0 for x in b):
+            raise bad("box_plus", b, "a list of three positive finite numbers [Lx+, y_top+, Lz+]")
+    if "grid" in meta:
+        g = meta["grid"]
+        if not isinstance(g, list) or len(g) != 3 or not all(isinstance(x, int) and not isinstance(x, bool) and x > 0 for x in g):
+            raise bad("grid", g, "a list of three positive integers [nx, ny, nz]")
+    if "kind" in meta and not isinstance(meta["kind"], str):
+        raise bad("kind", meta["kind"], 'a string (e.g. "les")')
+
+
 def open_dataset(path=None) -> FlowDataset:
     """Open a flow dataset folder (None: the shipped default LES dataset).
 
@@ -272,12 +341,11 @@ def open_dataset(path=None) -> FlowDataset:
     if not meta_file.exists():
         raise DatasetError(f"{p}: no meta.json — not a saltation flow dataset (import raw data with 'saltation flow import')")
     try:
-        meta = json.loads(meta_file.read_text())
-    except json.JSONDecodeError as exc:
-        raise DatasetError(f"{meta_file}: not valid JSON ({exc})") from None
-    missing = [k for k in _REQUIRED_META if k not in meta]
-    if missing:
-        raise DatasetError(f"{meta_file}: missing metadata {missing}")
+        meta = json.loads(meta_file.read_text(encoding="utf-8"))
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise DatasetError(f"{meta_file}: not valid JSON ({exc}); fix the file, or write the dataset again "
+                           f"with 'saltation flow import' / 'flow generate'") from None
+    _validate_meta(meta, meta_file)
     arrays = {}
     for name in ("x", "y", "z", "u"):
         f = p / f"{name}.npy"
@@ -291,7 +359,14 @@ def open_dataset(path=None) -> FlowDataset:
     want = np.dtype(st["dtype"])
     if arrays["u"].dtype != want:
         raise DatasetError(f"{p / 'u.npy'}: dtype {arrays['u'].dtype} but meta.json says {want}")
-    _validate_grid(arrays["x"], arrays["y"], arrays["z"], np.asarray(meta["times_plus"]), arrays["u"].shape, str(p))
+    _validate_grid(arrays["x"], arrays["y"], arrays["z"], np.asarray(meta["times_plus"], dtype=float),
+                   arrays["u"].shape, str(p))
+    if "grid" in meta and list(meta["grid"]) != [len(arrays["x"]), len(arrays["y"]), len(arrays["z"])]:
+        raise DatasetError(f"{meta_file}: grid = {meta['grid']} but the arrays hold "
+                           f"{[len(arrays['x']), len(arrays['y']), len(arrays['z'])]} cell centres (x, y, z)")
+    if (len(arrays["x"]) < 2 or len(arrays["z"]) < 2) and "box_plus" not in meta:
+        raise DatasetError(f"{meta_file}: box_plus is missing; a dataset one cell wide in x or z needs it "
+                           f"([Lx+, y_top+, Lz+])")
     return FlowDataset(
         path=p,
         meta=meta,

@@ -10,7 +10,16 @@ __version__ = "0.1.0"
 
 import flowfields  # noqa: E402,F401  (sets the versioned Numba cache before any kernel loads)
 
-from . import analysis  # noqa: E402,F401  (analysis.diffusion, analysis.transport: pure Python, no kernels)
+
+
+def __getattr__(name):
+    """``saltation.analysis`` on first use (PEP 562): it imports pandas, which a plain
+    ``import saltation`` (the command line's start) need not wait for."""
+    if name == "analysis":
+        import importlib
+
+        return importlib.import_module(".analysis", __name__)
+    raise AttributeError(f"module 'saltation' has no attribute {name!r}")
 
 
 def run(case, out=None, progress=True, **overrides):

@@ -8,6 +8,17 @@ import sys
 from pathlib import Path
 
 
+class UsageError(ValueError):
+    """Bad command-line input found by the CLI itself (printed as "saltation: error: …", exit 2)."""
+
+
+def _out_dir(path, option="--out") -> Path:
+    """An --out folder checked before any long work (saltation.run_directory)."""
+    from .run_directory import check_output_directory
+
+    return check_output_directory(path, option)
+
+
 def _flow_info(args) -> int:
     from flowfields import open_dataset
 
@@ -46,8 +57,8 @@ def _flow_check(args) -> int:
     from flowfields import open_dataset
     from flowfields.check import write_profile_check
 
+    out = _out_dir(args.out)
     ds = open_dataset(args.dataset)
-    out = Path(args.out)
     summary = write_profile_check(ds, out)
     print(f"Re_tau = {summary['re_tau']:.1f}; first cell centre at y+ = {summary['first_cell_y_plus']:.3f}")
     print(f"{'y+':>6} {'u+ (LES)':>9} {'u+ (law)':>9} {'diff':>7}  law")
@@ -64,9 +75,19 @@ def _flow_check(args) -> int:
 def _flow_import(args) -> int:
     from flowfields.importer import import_series
 
+    _out_dir(args.out)
     prov = {}
     if args.provenance:
-        prov = json.loads(Path(args.provenance).read_text())
+        src = Path(args.provenance)
+        if not src.is_file():
+            raise UsageError(f"--provenance {args.provenance!r}: no such file")
+        try:
+            prov = json.loads(src.read_text(encoding="utf-8"))
+        except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+            raise UsageError(f"--provenance {args.provenance!r}: not valid JSON ({exc})") from None
+        if not isinstance(prov, dict):
+            raise UsageError(f"--provenance {args.provenance!r}: must hold a JSON object (the generator's "
+                             f"provenance.json), got {type(prov).__name__}")
         prov["les_command_line"] = prov.pop("command_line", None)
     prov["import_command"] = "saltation " + " ".join(shlex.quote(a) for a in sys.argv[1:])
     path = import_series(args.src, args.out, nu=args.nu, provenance=prov, y_max_plus=args.y_max_plus, dtype=args.dtype,
@@ -78,6 +99,8 @@ def _flow_import(args) -> int:
 def _flow_generate(args) -> int:
     from flowfields.generate import ChannelParams, generate
 
+    _out_dir(args.out)
+    _out_dir(args.work_dir, "--work-dir")
     params = ChannelParams(
         re_tau=args.re_tau,
         lx_h=args.lx,
@@ -98,18 +121,45 @@ def _flow_generate(args) -> int:
     return 0
 
 
-def _run(args) -> int:
-    from .run import RunInterrupted, run
-
-    over = {}
-    for item in args.set or []:
+def _set_options(items) -> tuple[dict, dict]:
+    """--set items → ({"table.key": typed value}, {"table.key": the item as typed})."""
+    over, given = {}, {}
+    for item in items or []:
         if "=" not in item:
-            raise SystemExit(f"saltation: error: --set expects table.key=value, got {item!r}")
+            raise UsageError(f"--set {item!r}: expects TABLE.KEY=VALUE (e.g. --set run.seed=3)")
         k, v = item.split("=", 1)
         over[k.strip()] = v.strip()
+        given[k.strip()] = item
+    return _typed(over), given
 
-    try:
-        res = run(args.case, out=args.out, progress=not args.quiet, resume=args.resume, **_typed(over))
+
+def _blame_set(err, given: dict) -> str:
+    """A CaseError's text, blamed on the --set option that gave the value where it did."""
+    name = getattr(err, "override", None)
+    reason = getattr(err, "reason", None) or str(err)
+    if name is None and err.table and err.key:  # raised after loading (domain rules, run checks)
+        name = next((n for n in given if n.replace("__", ".") == f"{err.table}.{err.key}"), None)
+    if name is None:
+        return str(err)
+    if name in given:
+        return f"--set {given[name]}: {reason}"
+    return f"--set: {reason}"
+
+
+def _run(args) -> int:
+    from .config import CaseError, load_case
+    from .simulation import RunInterrupted, run
+
+    overrides, given = _set_options(args.set)
+    try:  # the case and the output folder first: bad input is an error before any long work
+        case = load_case(args.case, overrides or None)
+        out = args.out or case.output.directory or Path("runs") / (case.run.name or "run")
+        args._out_dir = Path(out)
+        _out_dir(out, "--out" if args.out else "run directory")
+        res = run(args.case, out=out, progress=not args.quiet, resume=args.resume, overwrite=args.overwrite,
+                  **overrides)
+    except CaseError as err:
+        raise UsageError(_blame_set(err, given)) from None
     except RunInterrupted as stop:
         s = stop.result.summary
         print(f"saltation: interrupted (signal {stop.signum}) at step {s['steps']}; outputs flushed, "
@@ -146,14 +196,110 @@ def _typed(over: dict) -> dict:
     return out
 
 
-def _sweep(args) -> int:
-    from .sweep import format_table, run_sweep
+class _QuietDaskAfterCtrlC:
+    """While a sweep runs: SIGINT raises KeyboardInterrupt as usual, and from then on Dask's
+    shutdown chatter (workers cancelled, killed, a cluster closed half-started) is dropped,
+    so that Ctrl-C ends with the one "sweep interrupted" line."""
+
+    def __init__(self):
+        self.interrupted = False
+        self._old = None
+
+    def filter(self, record) -> bool:  # logging.Filter protocol
+        return not (self.interrupted and record.name.startswith(("distributed", "tornado", "asyncio")))
+
+    def _on_sigint(self, signum, frame):
+        self._quiet()
+        raise KeyboardInterrupt
+
+    def _quiet(self):
+        import logging
+
+        self.interrupted = True
+        for name in ("", "distributed"):  # distributed adds its handler when it is first imported
+            for h in logging.getLogger(name).handlers:
+                if self not in h.filters:
+                    h.addFilter(self)
+
+    def __enter__(self):
+        import signal
+        import threading
+
+        if threading.current_thread() is threading.main_thread() and signal.getsignal(signal.SIGINT) is signal.default_int_handler:
+            self._old = signal.signal(signal.SIGINT, self._on_sigint)
+        return self
+
+    def __exit__(self, exc_type, exc, tb):
+        import signal
+
+        import logging
+
+        if isinstance(exc, KeyboardInterrupt):  # distributed's own handler stays filtered: the
+            self._quiet()                       # cluster's exit-time close still logs
+            self._quiet_atexit()
+        for h in logging.getLogger().handlers:  # the application's handlers are left as found
+            h.removeFilter(self)
+        if self._old is not None:
+            signal.signal(signal.SIGINT, self._old)
+        return False
+
+    def _quiet_atexit(self):
+        """A LocalCluster interrupted while starting is closed by distributed at exit,
+        which fails on its half-started workers (a traceback): close it quietly instead."""
+        import atexit
+        import contextlib
+
+        spec = sys.modules.get("distributed.deploy.spec")
+        close = getattr(spec, "close_clusters", None)
+        if close is None:
+            return
+        atexit.unregister(close)
+
+        def quiet_close():
+            with contextlib.suppress(BaseException):
+                close()
+
+        atexit.register(quiet_close)
+
+
+def _check_scheduler_address(address: str) -> None:
+    """--scheduler must read [SCHEME://]HOST:PORT with a scheme Dask knows."""
+    from .sweep import import_dask
+
+    import_dask()
+    from distributed.comm.addressing import parse_address
+    from distributed.comm.registry import get_backend
 
     try:
-        df = run_sweep(args.sweep, out=args.out, scheduler=args.scheduler, workers=args.workers,
-                       threads_per_worker=args.threads_per_worker)
-    except KeyboardInterrupt:
-        return 130
+        scheme, _ = parse_address(address)
+        backend = get_backend(scheme)
+        if scheme != "inproc":
+            backend.get_address_host_port(parse_address(address)[1])
+    except (ValueError, NotImplementedError) as exc:
+        raise UsageError(f"--scheduler {address!r}: {exc}; give the scheduler's address, e.g. tcp://HOST:8786") from None
+
+
+def _sweep(args) -> int:
+    from .sweep import format_table, load_sweep, run_sweep
+
+    sweep = load_sweep(args.sweep)
+    out = Path(args.out or Path("sweeps") / (sweep.path.stem if sweep.path else "sweep"))
+    args._out_dir = out
+    _out_dir(out, "--out" if args.out else "sweep folder")
+    for option in ("workers", "threads_per_worker"):
+        n = getattr(args, option)
+        if n is not None and n < 1:
+            raise UsageError(f"--{option.replace('_', '-')} {n}: must be at least 1")
+    if args.scheduler:
+        _check_scheduler_address(args.scheduler)
+    try:
+        with _QuietDaskAfterCtrlC():
+            df = run_sweep(sweep, out=out, scheduler=args.scheduler, workers=args.workers,
+                           threads_per_worker=args.threads_per_worker)
+    except OSError as exc:
+        if not args.scheduler:
+            raise
+        raise UsageError(f"--scheduler {args.scheduler}: cannot reach the Dask scheduler ({exc})") from None
     print(format_table(df))
     bad = df[df["status"] != "completed"]
     if len(bad):
@@ -163,14 +309,16 @@ def _sweep(args) -> int:
 
 
 def _analyze(args) -> int:
-    from .analysis.report import analyze
+    from .analysis.report import analyze, windows_text
 
-    res = analyze(args.directory, out=args.out, validation=args.validation)
-    if res["kind"] == "run":
+    res = analyze(args.directory, out=args.out, validation=args.validation, diameter=args.diameter,
+                  time_scale=args.time_scale)
+    if res["kind"] in ("run", "tracks"):
         d = res["diffusion"]
+        if d is not None:
+            print(f"diffusion ({d['source']}, {d['n_particles']} grains, samples every {d['sample_interval']:.3g} d/u*)")
+            print(windows_text(d))
         if d is not None and len(d.table):
-            print(f"diffusion ({d['source']}; T_J = " + (f"{d['jump_duration']:.3g}" if d["jump_duration"] else "?")
-                  + " d/u*)")
             print(f"{'range':<13}{'dir':<4}{'t (d/u*)':>15} {'gamma':>6} {'95 % CI':>14} {'points':>6}")
             for _, r in d.table.iterrows():
                 print(f"{r['range']:<13}{r['direction']:<4}{r['t_min']:>7.3g}-{r['t_max']:<7.3g} {r['gamma']:6.3f} "
@@ -189,8 +337,19 @@ def _analyze(args) -> int:
 
 
 def _validate(args) -> int:
-    from .validate import run_validation
+    from .validate import read_experiments, run_validation
 
+    if args.data:  # before the runs: a wrong file is an error now, not after them
+        try:
+            read_experiments(args.data)
+        except FileNotFoundError:
+            raise UsageError(f"--data {args.data!r}: no such file") from None
+        except (ValueError, UnicodeDecodeError) as exc:
+            text = str(exc)
+            raise UsageError(f"--data {text}" if text.startswith(str(args.data)) else f"--data {args.data!r}: {text}") from None
+    if not args.duration_scale > 0:
+        raise UsageError(f"--duration-scale {args.duration_scale}: must be a positive number")
+    _out_dir(args.out)
     res = run_validation(args.out, data=args.data, duration_scale=args.duration_scale, ablation=not args.no_ablation)
     print(f"{'tau*/tau*c':>10} {'jumps':>6} {'H/d':>12} {'vR':>5} {'L/d':>13} {'vR':>5} {'U/u*':>12} {'vR':>5}")
     for r in res["validation"]:
@@ -215,6 +374,8 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--quiet", action="store_true", help="no progress bar")
     r.add_argument("--resume", action="store_true",
                    help="continue from the run directory's checkpoint (written periodically and on SIGINT/SIGTERM)")
+    r.add_argument("--overwrite", action="store_true",
+                   help="replace the outputs of an earlier run in the run directory (other files are left alone)")
     r.set_defaults(func=_run)
 
     sw = sub.add_parser("sweep", help="many cases (a [sweep] grid) on a local or remote Dask cluster; skips finished cases")
@@ -228,8 +389,15 @@ def build_parser() -> argparse.ArgumentParser:
     sw.set_defaults(func=_sweep)
 
     a = sub.add_parser("analyze", help="jump statistics, diffusion exponents, collision statistics, figures, HTML report")
-    a.add_argument("directory", metavar="RUN_OR_SWEEP_DIR", help="a run directory or a sweep directory (cases/NAME/)")
-    a.add_argument("--out", default=None, help="output folder (default RUN_OR_SWEEP_DIR/analysis)")
+    a.add_argument("directory", metavar="PATH",
+                   help="a run directory, a sweep directory (cases/NAME/), or a tracks file (.csv/.parquet, columns "
+                        "particle, t in d/u*, x and z unwrapped in d; y optional): diffusion only")
+    a.add_argument("--out", default=None, help="output folder (default PATH/analysis; for a file <stem>_analysis/ beside it)")
+    a.add_argument("--diameter", type=float, default=1.0,
+                   help="tracks file only: the grain diameter d in the file's length unit (x, y, z are divided by it; "
+                        "default 1: already in d)")
+    a.add_argument("--time-scale", type=float, default=1.0,
+                   help="tracks file only: d/u* in the file's time unit (t is divided by it; default 1: already in d/u*)")
     a.add_argument("--validation", default=None,
                    help="folder written by `saltation validate nino-garcia` (default: DIR/validation or DIR/../validation if present)")
     a.set_defaults(func=_analyze)
@@ -287,20 +455,64 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+def _interrupted(args) -> str:
+    """The line printed on Ctrl-C: what was interrupted and what to do next."""
+    cmd = getattr(args, "command", None)
+    out = getattr(args, "_out_dir", None)
+    again = "saltation " + " ".join(shlex.quote(a) for a in getattr(args, "_argv", []))
+    if cmd == "run":
+        if out is None:
+            return "saltation: interrupted while loading the case; nothing was written"
+        from .run_directory import CHECKPOINT_NAME
+
+        sets = "".join(f" --set {shlex.quote(x)}" for x in args.set or [])
+        if (out / CHECKPOINT_NAME).exists():
+            return (f"saltation: interrupted; the checkpoint {out / CHECKPOINT_NAME} is kept: continue with: "
+                    f"saltation run {shlex.quote(args.case)} --resume --out {shlex.quote(str(out))}{sets}")
+        try:  # files of this run (config.toml, ...) make a plain rerun refuse the folder
+            used = out.is_dir() and any(p.name != ".lock" for p in out.iterdir())
+        except OSError:
+            used = False
+        if used:
+            argv = [a for a in getattr(args, "_argv", []) if a not in ("--resume", "--overwrite")] + ["--overwrite"]
+            again = "saltation " + " ".join(shlex.quote(a) for a in argv)
+        return (f"saltation: run interrupted before a checkpoint was written (while loading the flow or "
+                f"compiling kernels): nothing to resume in {out}; start again with: {again}")
+    if cmd == "sweep":
+        where = f" in {out}" if out is not None else ""
+        return f"saltation: sweep interrupted; finished cases are kept{where}: run the same command again to continue"
+    what = f"flow {args.flow_command}" if cmd == "flow" else cmd or "command"
+    return f"saltation: {what} interrupted; its output may be incomplete: run it again with: {again}"
+
+
 def main(argv=None) -> int:
-    parser = build_parser()
-    args = parser.parse_args(argv)
-    from flowfields.dataset import DatasetError
-
-    from .analysis.variance import AnalysisError
-    from .config import CaseError
-    from .run import SimulationError
-
+    argv = sys.argv[1:] if argv is None else list(argv)
+    args = argparse.Namespace()
     try:
-        return int(args.func(args) or 0)
-    except (DatasetError, CaseError, SimulationError, AnalysisError, FileNotFoundError) as exc:
-        print(f"saltation: error: {exc}", file=sys.stderr)
-        return 2
+        args = build_parser().parse_args(argv)
+        args._argv = argv
+        from flowfields.dataset import DatasetError
+
+        from .analysis.variance import AnalysisError
+        from .config import CaseError
+        from .run_directory import RunDirectoryError
+        from .run_directory import OutputDirectoryError
+        from .simulation import SimulationError
+        from .sweep import MissingExtraError
+
+        try:
+            return int(args.func(args) or 0)
+        except (DatasetError, CaseError, SimulationError, AnalysisError, FileNotFoundError, UsageError,
+                OutputDirectoryError, RunDirectoryError, MissingExtraError) as exc:
+            print(f"saltation: error: {exc}", file=sys.stderr)
+            return 2
+    except KeyboardInterrupt:  # Ctrl-C at any moment: one line, no traceback (the run loop's own
+        # RunInterrupted, a checkpoint written, is answered by _run with the resume command)
+        try:
+            print(_interrupted(args), file=sys.stderr)
+        except KeyboardInterrupt:
+            pass
+        return 130
 
 
 if __name__ == "__main__":

@@ -117,12 +117,18 @@ class CaseError(ValueError):
     """A case that cannot run. The message names the table, the key and what is allowed.
 
     ``table`` and ``key`` hold the offending names where one key is to blame.
+    ``override`` is the override (``"table.key"``, as given) to blame when the bad value
+    came from an override (``--set``, a keyword of ``run``) rather than from the case
+    file; ``reason`` is the message without the "where it came from" prefix.
     """
 
-    def __init__(self, message: str, table: str | None = None, key: str | None = None):
+    def __init__(self, message: str, table: str | None = None, key: str | None = None, *,
+                 override: str | None = None, reason: str | None = None):
         super().__init__(message)
         self.table = table
         self.key = key
+        self.override = override
+        self.reason = message if reason is None else reason
 
 
 # --------------------------------------------------------------------------- schema
@@ -1080,23 +1086,69 @@ def _build(tables: dict[str, dict[str, Any]]) -> Case:
     return Case(**built)
 
 
+def _override_names(overrides) -> dict[tuple[str, str], tuple[str, Any]]:
+    """{(table, key): (name as given, value)} of the overrides that parse."""
+    if overrides is None:
+        return {}
+    if isinstance(overrides, str):
+        overrides = [overrides]
+    if isinstance(overrides, Mapping):
+        items = [(str(k), v) for k, v in overrides.items()]
+    else:
+        items = [(i.partition("=")[0], _parse_value(i.partition("=")[2])) for i in overrides
+                 if isinstance(i, str) and "=" in i]
+    out = {}
+    for name, value in items:
+        table, _, key = name.strip().replace("__", ".").partition(".")
+        out[(table, key)] = (name.strip(), value)
+    return out
+
+
+def _blame_override(err: CaseError, name: str, value: Any) -> CaseError:
+    shown = "" if value is _NO_VALUE else f" = {value!r}"
+    return CaseError(f"override {name}{shown}: {err.reason}", err.table, err.key,
+                     override=name, reason=err.reason)
+
+
+_NO_VALUE = object()
+
+
 def _from_tables(tables: Mapping[str, Any], overrides, base_dir: Path | None,
                  name: str | None, origin: str | None) -> Case:
+    """A Case from tables plus overrides. An error is blamed on the override that gave
+    the bad value (``CaseError.override``), else on ``origin`` (the case file)."""
+    given = _override_names(overrides)
+    try:
+        extra = parse_overrides(overrides)
+        _resolve_paths(extra, Path.cwd())
+        _check_names(extra)
+    except CaseError as err:  # the overrides themselves are malformed or name no key
+        hit = given.get((err.table or "", err.key or ""))
+        if hit is None and err.table is not None:
+            hit = next((v for (t, _k), v in given.items() if t == err.table), None)
+        if hit is None:  # a name that is not table.key
+            hit = next((v for (t, k), v in given.items() if not t or not k or "." in k), None)
+        if hit is not None:
+            raise _blame_override(err, *hit) from None
+        raise CaseError(str(err), err.table, err.key, override="", reason=err.reason) from None
     try:
         raw = {k: (dict(v) if isinstance(v, Mapping) else v) for k, v in tables.items()}
         if base_dir is not None:
             _resolve_paths(raw, base_dir)
-        extra = parse_overrides(overrides)
-        _resolve_paths(extra, Path.cwd())
-        _check_names(extra)
         _apply_overrides(raw, extra)
         if name is not None and isinstance(raw.get("run"), dict):
             raw["run"].setdefault("name", name)
         return _build(raw)
     except CaseError as err:
-        if origin is None:
+        hit = given.get((err.table or "", err.key or ""))
+        if hit is not None:
+            raise _blame_override(err, *hit) from None
+        if origin is None and not given:
             raise
-        raise CaseError(f"{origin}: {err}", err.table, err.key) from None
+        where = origin or "case"
+        if given:  # a check across keys: the case file's key, but overrides in effect
+            where += " with override(s) " + ", ".join(f"{n} = {v!r}" for n, v in given.values())
+        raise CaseError(f"{where}: {err.reason}", err.table, err.key, reason=err.reason) from None
 
 
 def load_case(source, overrides=None) -> Case:

@@ -1,4 +1,9 @@
-"""The run directory: refuse to mix two runs' files, lock it while a run writes.
+"""Output folders and the run directory: checked before long work, never two runs' files
+mixed, locked while a run writes.
+
+Any ``--out`` (run, sweep, validate, flow …) is checked first (``check_output_directory``):
+a path that is a file, lies under a file or cannot be written is a clear error at once,
+not a traceback after the flow is loaded and the kernels compiled.
 
 A run directory that already holds files is someone's results: a new run into it is
 refused unless it resumes that run (``--resume``: its checkpoint) or replaces it
@@ -16,10 +21,12 @@ import json
 import os
 import shutil
 import socket
+import tempfile
 import time
 from pathlib import Path
 
 LOCK = ".lock"
+CHECKPOINT_NAME = "checkpoint.npz"  # the run's checkpoint (simulation.CHECKPOINT), known here without Numba
 # everything a run (spheres or composites) or `saltation analyze` of it writes
 RUN_OUTPUTS = ("config.toml", "summary.json", "jumps.parquet", "tracks.parquet", "particles.parquet",
                "variance.parquet", "particles.pvd", "vtk", "checkpoint.npz", ".parts", "analysis")
@@ -27,6 +34,48 @@ RUN_OUTPUTS = ("config.toml", "summary.json", "jumps.parquet", "tracks.parquet",
 
 class RunDirectoryError(RuntimeError):
     """The run directory cannot be used: the message says why and what to do."""
+
+
+class OutputDirectoryError(RunDirectoryError, ValueError):
+    """An output folder that cannot be used; the message names the path and the problem."""
+
+
+def check_output_directory(path, what: str = "run directory") -> Path:
+    """``path`` as a Path, once it is known that it is (or can be made as) a writable folder.
+
+    Nothing is created: an existing folder is probed by really creating (and removing) a
+    temporary file in it, a missing one by doing so in its nearest existing parent, since
+    permission bits do not tell (root writes to a read-only folder; a read-only mount
+    refuses even root). ``what`` starts the message (e.g. "--out", "run directory").
+    Raises :class:`OutputDirectoryError`."""
+    p = Path(path).expanduser()
+    shown = f"{what} {str(path)!r}"
+    if p.exists() and not p.is_dir():
+        raise OutputDirectoryError(f"{shown} is an existing file, not a folder; give a folder path "
+                                   f"(or remove the file)")
+    probe = p
+    while not probe.exists():
+        if probe.is_symlink():  # a dangling link: mkdir would fail on it
+            raise OutputDirectoryError(f"{shown}: {str(probe)!r} is a broken symbolic link")
+        parent = probe.parent
+        if parent == probe:
+            break
+        probe = parent
+    if probe.exists() and not probe.is_dir():
+        raise OutputDirectoryError(f"{shown} lies under {str(probe)!r}, which is a file, not a folder; "
+                                   f"give a path whose parents are folders")
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=".saltation-write-test-", dir=probe)
+    except OSError as err:
+        where = "" if probe == p else f" (its nearest existing parent {str(probe)!r} cannot be written)"
+        raise OutputDirectoryError(f"{shown} cannot be written{where}: {err.strerror or err}; "
+                                   f"check its permissions or give another folder") from None
+    os.close(fd)
+    try:
+        os.unlink(tmp)
+    except OSError:
+        pass
+    return p
 
 
 def _lock(path: Path):
@@ -73,24 +122,15 @@ def _describe(path: Path, files: list[str]) -> str:
 
 
 @contextlib.contextmanager
-def claim_run_directory(path, *, resume: bool = False, overwrite: bool = False, checkpoint: str = "checkpoint.npz"):
+def claim_run_directory(path, *, resume: bool = False, overwrite: bool = False, checkpoint: str = CHECKPOINT_NAME):
     """Create and lock ``path`` for one run; refuse a directory with files in it unless
     resume (its checkpoint is then read by the run) or overwrite (the run's outputs are
     removed). Released when the block ends, however it ends."""
     path = Path(path)
     if resume and overwrite:
         raise RunDirectoryError("--resume and --overwrite contradict each other: give one")
-    try:
-        path.mkdir(parents=True, exist_ok=True)
-    except FileExistsError:
-        raise RunDirectoryError(f"run directory {path} is a file (or lies under one); choose another --out") from None
-    except NotADirectoryError:
-        raise RunDirectoryError(f"run directory {path} lies under a file; choose another --out") from None
-    except PermissionError:
-        raise RunDirectoryError(f"run directory {path} cannot be created (permission denied); "
-                                f"choose another --out") from None
-    if not path.is_dir():
-        raise RunDirectoryError(f"run directory {path} is a file; choose another --out")
+    check_output_directory(path)
+    path.mkdir(parents=True, exist_ok=True)
     try:
         fd = _lock(path)
     except PermissionError:

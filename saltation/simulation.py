@@ -30,6 +30,7 @@ from .integrator import NOT_FINITE, make_state, make_workspace
 from .statistics import DISCARDED_JUMPS, empty_rows, jump_statistics  # noqa: F401  (DISCARDED_JUMPS: re-exported)
 from .stepping import Stepper
 from .progress import compile_notice
+from .run_directory import CHECKPOINT_NAME
 from .writers import JumpWriter, ParaViewWriter, TrackWriter, run_metadata, write_json, write_table
 
 VARIANCE_FILE = "variance.parquet"  # displacement variances for the diffusion exponents
@@ -57,7 +58,7 @@ class RunInterrupted(KeyboardInterrupt):
 # buffers). Those points depend on the state alone, never on wall time or on when a
 # signal came, so a resumed run calls the kernel with the same (t0, n_steps) chunks and
 # collects jumps in the same order as an uninterrupted one: bit for bit the same run.
-CHECKPOINT = "checkpoint.npz"
+CHECKPOINT = CHECKPOINT_NAME  # "checkpoint.npz" (run_directory.py)
 PARTS = ".parts"  # checkpointable Parquet parts, merged into jumps/tracks.parquet at the end
 CHUNK_STEPS = 200  # longest stretch between two chunk ends (how soon a signal is honoured)
 # besides every output.checkpoint_every s of wall time: a checkpoint each time the run has

@@ -50,10 +50,13 @@ def test_analyze_run_directory(tmp_path):
     run = make_run(tmp_path / "run")
     res = analyze(run)
     out = run / "analysis"
-    for f in ("jump_stats.csv", "diffusion.csv", "variance_curves.csv", "variance.png", "jump_distributions.png",
-              "collisions_cost.csv", "report.html"):
+    for f in ("jump_stats.csv", "diffusion.csv", "crossover.csv", "variance_curves.csv", "variance.png",
+              "jump_distributions.png", "collisions_cost.csv", "report.html"):
         assert (out / f).exists(), f
     d = res["diffusion"]
+    # the windows come from the crossover (τ = 4 d/u* hops); T_J of jumps.parquet is the cross-check
+    assert d["windows_from"] == {"local": "crossover", "intermediate": "crossover"}
+    assert d["jump_duration_from"] == "jumps.parquet" and d["crossover"]["t_c"] == pytest.approx(4.0, rel=0.2)
     assert d["local"]["gamma_x"] == pytest.approx(1.0, abs=0.08)
     js = pd.read_csv(out / "jump_stats.csv").set_index("quantity")
     assert js.loc["T", "n"] == 10 * 30  # the first 10 of each grain's 20 jumps are dropped
@@ -104,3 +107,99 @@ def test_cli_errors(tmp_path, capsys):
     (tmp_path / "empty").mkdir()
     assert main(["analyze", str(tmp_path / "empty")]) == 2
     assert "nothing to analyse" in capsys.readouterr().err
+
+
+# --------------------------------------------------------------------------- tracks files (issue 16)
+def test_analyze_tracks_csv_from_the_command_line(tmp_path, capsys):
+    """`saltation analyze tracks.csv`: diffusion table, crossover table, variance figure and
+    report in <stem>_analysis/ beside the file; the printed and written t_c and γ are those
+    of exponents() on the same tracks; SI units converted with --diameter/--time-scale."""
+    from test_crossover import hop_tracks
+
+    from saltation.analysis.diffusion import exponents
+
+    tracks, expected = hop_tracks(n=80, n_samples=2500, seed=11)
+    tracks.to_csv(tmp_path / "flume.csv", index=False)
+    assert main(["analyze", str(tmp_path / "flume.csv")]) == 0
+    printed = capsys.readouterr().out
+    out = tmp_path / "flume_analysis"
+    for f in ("diffusion.csv", "crossover.csv", "variance_curves.csv", "variance.png", "report.html"):
+        assert (out / f).exists(), f
+    ref_res = exponents(tracks)
+    cr = pd.read_csv(out / "crossover.csv").set_index("direction")
+    assert cr.loc["x", "t_c"] == pytest.approx(ref_res["crossover"]["t_c"], rel=1e-9)
+    assert bool(cr.loc["x", "sets_ranges"]) and not bool(cr.loc["z", "sets_ranges"])
+    assert 0.8 * expected < cr.loc["x", "t_c"] < 1.2 * expected
+    assert f"t_c = {ref_res['crossover']['t_c']:.3g}" in printed and "T_J not known" in printed
+    tab = pd.read_csv(out / "diffusion.csv")
+    assert len(tab) == 4 and (tab["windows_from"] == "crossover").all()
+    np.testing.assert_allclose(tab["gamma"], ref_res.table["gamma"], rtol=1e-9)
+    page = (out / "report.html").read_text()
+    assert "data:image/png;base64," in page and "t_c" in page
+
+    si = tracks.assign(t=tracks["t"] * 0.0273, x=tracks["x"] * 0.69e-3, z=tracks["z"] * 0.69e-3)
+    si.to_parquet(tmp_path / "si.parquet")
+    assert main(["analyze", str(tmp_path / "si.parquet"), "--diameter", "0.00069", "--time-scale", "0.0273",
+                 "--out", str(tmp_path / "si_out")]) == 0
+    capsys.readouterr()
+    tab_si = pd.read_csv(tmp_path / "si_out" / "diffusion.csv")
+    np.testing.assert_allclose(tab_si["gamma"], tab["gamma"], atol=0.02)
+    assert pd.read_csv(tmp_path / "si_out" / "crossover.csv")["t_c"][0] == pytest.approx(cr.loc["x", "t_c"], rel=0.05)
+
+
+def test_analyze_tracks_file_errors(tmp_path, capsys):
+    pd.DataFrame({"particle": [0, 0], "t": [0.0, 1.0], "x": [0.0, 1.0]}).to_csv(tmp_path / "no_z.csv", index=False)
+    assert main(["analyze", str(tmp_path / "no_z.csv")]) == 2
+    err = capsys.readouterr().err
+    assert "lacks column(s) z" in err and "t (time, d/u*)" in err and "z (spanwise position, unwrapped, d)" in err
+    (tmp_path / "notes.txt").write_text("x")
+    assert main(["analyze", str(tmp_path / "notes.txt")]) == 2
+    assert "not a tracks file" in capsys.readouterr().err
+    run = make_run(tmp_path / "run", n_samples=300)
+    assert main(["analyze", str(run), "--diameter", "0.00069"]) == 2
+    assert "tracks file's units" in capsys.readouterr().err
+
+
+# --------------------------------------------------------------------------- report figures (issue 16 item 8)
+def _capture_figures(monkeypatch):
+    from saltation.analysis import report
+
+    figs = {}
+    real = report._save
+
+    def keep(fig, path):
+        figs[Path(path).name] = [(ax.get_title(), [t.get_text() for t in ax.texts]) for ax in fig.axes]
+        return real(fig, path)
+
+    monkeypatch.setattr(report, "_save", keep)
+    return figs
+
+
+def test_run_collisions_panel_names_grain_grain_and_bed(tmp_path, monkeypatch):
+    figs = _capture_figures(monkeypatch)
+    analyze(make_run(tmp_path / "run", n_samples=300))
+    title = figs["collisions_cost.png"][1][0]
+    # summary: 3·30 grain–grain collisions → per_particle 20.0 as written by make_run; 20·30 bed impacts → 20 per grain
+    assert "grain–grain" in title and "bed" in title and "bed collisions per grain" not in title
+    assert "20.0 grain–grain" in title and "20.0 bed" in title
+
+
+def test_sweep_velocity_figure_says_why_it_is_empty_without_tracks(tmp_path, monkeypatch):
+    import warnings
+
+    figs = _capture_figures(monkeypatch)
+    sweep = tmp_path / "sweep"
+    for name, c in (("a", 0.0004), ("b", 0.0026)):
+        (make_run(sweep / "cases" / name, concentration=c, n_samples=300) / "tracks.parquet").unlink()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", UserWarning)  # matplotlib's "No artists with labels" legend warning
+        analyze(sweep)
+    texts = figs["fig6_velocity.png"][1][1]
+    assert texts and "no tracks.parquet in 2 of 2 case(s)" in texts[0] and "output.tracks = true" in texts[0]
+    # with tracks in one case of two the panel is drawn and names the case without them
+    sweep2 = tmp_path / "sweep2"
+    make_run(sweep2 / "cases" / "a", n_samples=300)
+    (make_run(sweep2 / "cases" / "b", concentration=0.0026, n_samples=300) / "tracks.parquet").unlink()
+    analyze(sweep2)
+    texts = figs["fig6_velocity.png"][1][1]
+    assert "no tracks.parquet in 1 of 2 case(s) (b)" in texts[0]

@@ -144,6 +144,7 @@ def test_sigint_to_the_cli_checkpoints_and_resume_completes(tmp_path):
     _, err = proc.communicate(timeout=120)
     assert proc.returncode == 128 + signal.SIGINT, err
     assert "--resume" in err
+    assert "Traceback" not in err and len(err.strip().splitlines()) <= 3, err  # a clean stop, no traceback
     summary = json.loads((out / "summary.json").read_text())
     assert summary["status"] == "interrupted" and summary["steps"] < 5000
 

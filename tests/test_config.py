@@ -512,3 +512,30 @@ def test_direct_construction_validates():
     with pytest.raises(CaseError, match=r"run\.n_particles = 0"):
         dataclasses.replace(case, run=dataclasses.replace(case.run, n_particles=0))
     assert isinstance(dataclasses.replace(case), Case)
+
+
+def test_override_errors_blame_the_override_not_the_file(tmp_path):
+    """issue 16 item 6: a bad override value is named as an override (with the value given),
+    with CaseError.override set for the command line to name its --set option."""
+    path = tmp_path / "case.toml"
+    path.write_text('[particle]\ndiameter = 0.69e-3\n[flow]\nsource = "loglaw"\ntau_ratio = 1.79\n'
+                    '[run]\nduration = 1.0\nn_particles = 3\n')
+    with pytest.raises(CaseError) as info:
+        load_case(path, {"run.dt_particle": "abc"})
+    err = info.value
+    assert str(err).startswith("override run.dt_particle = 'abc': run.dt_particle must be a number")
+    assert str(path) not in str(err)
+    assert (err.override, err.table, err.key) == ("run.dt_particle", "run", "dt_particle")
+    assert err.reason == "run.dt_particle must be a number, got 'abc' (str)"
+    with pytest.raises(CaseError) as info:
+        load_case(path, ["bed.model=wrong"])
+    assert info.value.override == "bed.model" and '"virtual", "packed"' in str(info.value)
+    with pytest.raises(CaseError) as info:
+        load_case(path, {"bedd.model": "virtual"})
+    assert info.value.override == "bedd.model" and "did you mean [bed]" in str(info.value)
+    # the file's own value is still blamed on the file, even with overrides in effect
+    path.write_text(path.read_text().replace("n_particles = 3", "n_particles = -3"))
+    with pytest.raises(CaseError) as info:
+        load_case(path, {"run.seed": 2})
+    err = info.value
+    assert err.override is None and str(err).startswith(f"{path} with override(s) run.seed = 2: run.n_particles = -3")

@@ -120,23 +120,35 @@ def hopping_grains(n=300, tau=4.0, dt=0.08, n_samples=6000, seed=5):
 
 
 def test_two_regime_process_crossover_and_both_ranges():
-    """Ballistic then diffusive: the jump duration is found from the bed contacts in the
-    tracks (within 5 % of τ), the local range gives γ ≈ 1 (0.93–1.01: the fit reaches
-    τ/2, where some grains already changed jump) and the intermediate range γ = ½ within
-    0.05 with the automatic windows, 0.03 far from the crossover."""
+    """Ballistic then diffusive: the windows come from the crossover t_c of ⟨X′²⟩ (within
+    10 % of τ, its 95 % interval holding τ), the jump duration found from the bed contacts
+    (within 5 % of τ) is reported beside it; the local range gives γ ≈ 1 (0.93–1.01: the
+    fit reaches t_c/2, where some grains already changed jump) and the intermediate range
+    γ = ½ within 0.05 with the automatic windows, 0.03 far from the crossover. Given
+    jump_duration= sets the windows instead."""
     tracks, tau = hopping_grains()
     assert jump_duration_from_tracks(tracks) == pytest.approx(tau, rel=0.05)
     res = exponents(tracks)
     assert res["jump_duration"] == pytest.approx(tau, rel=0.05)
-    lo, hi = res["windows"]["local"]
-    assert hi == pytest.approx(0.5 * res["jump_duration"])
-    assert res["windows"]["intermediate"][0] == pytest.approx(3 * res["jump_duration"])
+    assert res["jump_duration_from"] == "bed contacts in the tracks"
+    cr = res["crossover"]
+    assert cr["found"] and cr["direction"] == "x"
+    assert cr["t_c"] == pytest.approx(tau, rel=0.10)
+    assert cr["ci"][0] < tau < cr["ci"][1]
+    assert res["windows_from"] == {"local": "crossover", "intermediate": "crossover"}
+    assert res["windows"]["local"][1] == pytest.approx(0.5 * cr["t_c"])
+    assert res["windows"]["intermediate"][0] == pytest.approx(3 * cr["t_c"])
+    assert (res.table["t_c"] == cr["t_c"]).all() and (res.table["windows_from"] == "crossover").all()
     for d in ("x", "z"):
         assert 0.93 < res["local"][f"gamma_{d}"] < 1.01
         assert res["intermediate"][f"gamma_{d}"] == pytest.approx(0.5, abs=0.05)
     far = exponents(tracks, ranges={"intermediate": (10 * tau, 100.0)})
+    assert far["windows_from"] == {"local": "crossover", "intermediate": "ranges"}
     for d in ("x", "z"):
         assert far["intermediate"][f"gamma_{d}"] == pytest.approx(0.5, abs=0.03)
+    given = exponents(tracks, jump_duration=3.0)
+    assert given["windows"]["local"][1] == pytest.approx(1.5) and given["windows"]["intermediate"][0] == pytest.approx(9.0)
+    assert given["windows_from"]["local"] == "jump_duration" and given["jump_duration_from"] == "given"
 
 
 def test_accumulator_fed_in_steps_equals_tracks_path():
@@ -232,7 +244,7 @@ def test_run_writes_variance_and_exponents_reads_it(tmp_path):
     """A short LES run: variance.parquet from the run loop equals the tracks-based
     statistics when tracks are sampled on the same grid."""
     from saltation.config import load_case
-    from saltation.run import run
+    from saltation.simulation import run
 
     case = load_case("cases/default.toml", {"run.n_particles": 24, "run.duration": 1.0, "output.vtk": False})
     iv = case.variance_every * case.dt
@@ -250,11 +262,45 @@ def test_run_writes_variance_and_exponents_reads_it(tmp_path):
     assert a["local"]["gamma_x"] == pytest.approx(b["local"]["gamma_x"], rel=1e-9)
 
 
+def test_run_directory_and_its_tracks_dataframe_give_the_same_windows(tmp_path):
+    """Issue 16: a run directory (variance.parquet, jumps.parquet) and the DataFrame of its
+    tracks.parquet (contacts in y) used to set the windows from two different T_J. Both now
+    take them from the crossover of ⟨X′²⟩: with the tracks sampled like the variances the
+    curves are the same and so are t_c and the windows (to 1e-9: the curves agree to
+    rounding); tracks sampled every 0.5 d/u* (the default) give a t_c inside the 95 %
+    interval of the directory's and vice versa. The two T_J differ and are reported only."""
+    from saltation.config import load_case
+    from saltation.simulation import run
+
+    over = {"run.n_particles": 40, "run.duration": 1.5, "output.vtk": False}
+    case = load_case("cases/default.toml", over)
+    iv = case.variance_every * case.dt
+    run("cases/default.toml", out=tmp_path, progress=False, **over, **{"output.tracks_interval": iv})
+    tracks = pd.read_parquet(tmp_path / "tracks.parquet")
+    a = exponents(tmp_path, strict=False)
+    b = exponents(tracks, strict=False)
+    assert a["source"] == "variance.parquet" and b["source"] == "tracks"
+    assert a["jump_duration_from"] == "jumps.parquet" and b["jump_duration_from"] == "bed contacts in the tracks"
+    assert a["crossover"]["found"], a["crossover"]["reason"]
+    assert a["windows_from"] == b["windows_from"] == {"local": "crossover", "intermediate": "crossover"}
+    assert b["crossover"]["t_c"] == pytest.approx(a["crossover"]["t_c"], rel=1e-9)
+    for name in ("local", "intermediate"):
+        np.testing.assert_allclose(b["windows"][name], a["windows"][name], rtol=1e-9)
+        if name in a:
+            assert b[name]["gamma_x"] == pytest.approx(a[name]["gamma_x"], rel=1e-6)
+    # tracks at the default 0.5 d/u*: every 5th sample
+    t = np.sort(tracks["t"].unique())
+    coarse = exponents(tracks[tracks["t"].isin(t[::5])], strict=False)
+    ca, cc = a["crossover"], coarse["crossover"]
+    assert cc["found"] and coarse["sample_interval"] == pytest.approx(5 * a["sample_interval"])
+    assert ca["ci"][0] <= cc["t_c"] <= ca["ci"][1] and cc["ci"][0] <= ca["t_c"] <= cc["ci"][1]
+
+
 def test_variance_survives_interrupt_and_resume(tmp_path):
     """A run stopped mid-way (checkpoint) and resumed writes the variance.parquet of the
-    uninterrupted run, bit for bit; a resume without the saved sums writes none."""
+    uninterrupted run, bit for bit; the sums travel in the run's checkpoint."""
     from saltation.config import load_case, resolve_domain
-    from saltation.run import RunInterrupted, Simulation, open_flow, run
+    from saltation.simulation import CHECKPOINT, RunInterrupted, Simulation, open_flow, run
 
     case = {"particle": {"diameter": 0.69e-3}, "flow": {"source": "loglaw", "tau_ratio": 1.79},
             "run": {"n_particles": 16, "duration": 0.8, "dt_particle": 0.02, "seed": 3, "threads": 1},
@@ -263,16 +309,11 @@ def test_variance_survives_interrupt_and_resume(tmp_path):
     c = resolve_domain(load_case(case))  # as run() does for an analytic flow
     with pytest.raises(RunInterrupted):
         Simulation(c, open_flow(c), tmp_path / "b", progress=False, stop_after_steps=610).run()
-    assert (tmp_path / "b" / "variance.state.npz").exists()
+    with np.load(tmp_path / "b" / CHECKPOINT) as saved:
+        assert saved["variance.sums"].sum() > 0
     run(case, out=tmp_path / "b", progress=False, resume=True)
     a = pd.read_parquet(tmp_path / "ref" / "variance.parquet")
     b = pd.read_parquet(tmp_path / "b" / "variance.parquet")
     assert a["n"].sum() > 0
     pd.testing.assert_frame_equal(a, b, check_exact=True)
-    assert not (tmp_path / "b" / "variance.state.npz").exists()
-
-    with pytest.raises(RunInterrupted):
-        Simulation(c, open_flow(c), tmp_path / "c", progress=False, stop_after_steps=610).run()
-    (tmp_path / "c" / "variance.state.npz").unlink()
-    run(case, out=tmp_path / "c", progress=False, resume=True)
-    assert not (tmp_path / "c" / "variance.parquet").exists()
+    assert not (tmp_path / "b" / CHECKPOINT).exists()

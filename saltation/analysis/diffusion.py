@@ -5,28 +5,53 @@ an elapsed time t (unwrapped, in d), X′ = X − X̄ and ⟨⟩ the average ove
 equal elapsed time, then over several time origins (variance.py explains the plan).
 γ is the least-squares slope of log⟨X′²⟩ against log t, halved, over
 
-* the **local** range, between two bed impacts: from the first sampled lag to half the
-  typical jump duration T_J (ballistic, γ ≈ 1);
-* the **intermediate** range, many jumps: from 3 T_J to the longest lag (half the record
+* the **local** range, between two bed impacts: from the first sampled lag to ½ t_c
+  (ballistic, γ ≈ 1);
+* the **intermediate** range, many jumps: from 3 t_c to the longest lag (half the record
   after the first 10 % is skipped). γ = 0.5 normal diffusion, > 0.5 super-, < 0.5 sub-.
 
-T_J is found from the data: the median duration of the counted jumps in jumps.parquet
-(each grain's first 10 dropped, paper §3.2) or, from tracks alone, the median time between
-successive bed contacts (local minima of the centre height below 1.5 d). Both windows
-can be overridden (``ranges``), as can T_J (``jump_duration``). The median counts every
-bed impact, short rebounds included (on the virtual bed the duration distribution has a
-peak below 0.5 d/u* besides the saltation hops of 2–5 d/u*), so it is the shorter,
-conservative choice for where free flight ends.
+**The crossover t_c** is found from the streamwise curve ⟨X′²⟩(t) itself: log⟨X′²⟩ against
+log t is fitted by two straight segments that meet at a breakpoint (continuous
+piecewise-linear least squares, the breakpoint scanned on a fine grid), after the curve is
+interpolated onto a grid of 20 points per decade fixed in absolute log t (so that curves
+sampled at different lags weigh each decade alike). The uncertainty of t_c is the 95 %
+interval of the breakpoints refitted to the bootstrap curves (below). For grains that hop
+with independent velocities, the breakpoint sits where the ballistic asymptote var(u) t²
+meets the diffusive one, t_c ≈ E[T²]/E[T] ≈ the typical jump duration, so ½ t_c and 3 t_c
+are the fractions of T_J the ranges always used. The spanwise curve's breakpoint is fitted
+too and reported (``crossover_z``), not used.
+
+**Rule for the windows** (each range not given in ``ranges``), the same for a tracks
+DataFrame, a tracks file and a run directory:
+
+1. ``jump_duration=`` given: [first lag, ½ T_J] and [3 T_J, longest lag];
+2. otherwise the crossover t_c of ⟨X′²⟩: [first lag, ½ t_c] and [3 t_c, longest lag];
+3. only when no crossover is found (the fit's breakpoint falls at an end of the curve, or
+   the slope does not drop across it by ``CROSSOVER_MIN_DROP``): the typical jump duration
+   T_J from the data, as 1.
+
+T_J from the data is the median duration of the counted jumps in jumps.parquet (each
+grain's first 10 dropped, paper §3.2) or, from tracks with a centre height y, the median
+time between successive bed contacts (local minima of y below 1.5 d). It is reported
+(``jump_duration``) as a cross-check of t_c; it does not set the windows unless rule 3
+applies, because the two estimates differ (on the default run 1.7 d/u* from jumps.parquet,
+3 d/u* from the 0.5 d/u* track samples) and a DataFrame does not see jumps.parquet. So a
+run directory and its tracks DataFrame give the same windows: identical when the curves
+are (variance.parquet sampled as the tracks, or no variance.parquet), within the
+bootstrap interval of t_c when variance.parquet is sampled more finely than the tracks.
 
 Uncertainty: the bootstrap over grains — grains (or groups of grains: variance.py) are
 resampled with replacement, the curves and the fits recomputed; ``ci_low``/``ci_high``
-are the 2.5 and 97.5 percentiles of γ (a 95 % interval).
+are the 2.5 and 97.5 percentiles of γ (a 95 % interval). It covers the sampling noise of
+the ensemble, not the choice of model: where the bend from ballistic to intermediate is
+gradual, t_c also depends on how far the curve reaches on each side.
 
 Entry point (SPEC §9): ``exponents(tracks, ranges=None)`` with ``tracks`` a tracks
-DataFrame (columns particle, t, x, y, z, …; t in d/u*, x, z unwrapped in d) or a run
-directory (variance.parquet is used when present, tracks.parquet otherwise). The result
-is a dict ``{"local": {"gamma_x", "gamma_z", …}, "intermediate": {…}, "windows": …}``
-with ``.table`` (tidy DataFrame) and ``.curves`` (the variance curves).
+DataFrame (columns particle, t, x, z, optionally y, …; t in d/u*, x, z unwrapped in d) or
+a run directory (variance.parquet is used when present, tracks.parquet otherwise). The
+result is a dict ``{"local": {"gamma_x", "gamma_z", …}, "intermediate": {…}, "windows": …,
+"crossover": …}`` with ``.table`` (tidy DataFrame) and ``.curves`` (the variance curves).
+``read_tracks_file`` reads a CSV or Parquet file of tracks (``saltation analyze FILE``).
 """
 from __future__ import annotations
 
@@ -39,28 +64,42 @@ import pandas as pd
 from .variance import (VARIANCE_FILE, AnalysisError, VarianceAccumulator, make_plan, read_sums,
                        variance_curves)
 
-__all__ = ["exponents", "DiffusionResult", "AnalysisError", "jump_duration_from_tracks", "sums_from_tracks"]
+__all__ = ["exponents", "DiffusionResult", "AnalysisError", "crossover", "jump_duration_from_tracks", "read_tracks_file",
+           "sums_from_tracks"]
 
 MIN_PARTICLES = 10  # fewer grains give no meaningful ensemble variance
 MIN_POINTS = 5  # lags a range must hold for a log–log fit
-LOCAL_FRACTION = 0.5  # local range ends at T_J / 2
-INTERMEDIATE_START = 3.0  # intermediate range starts at 3 T_J
+LOCAL_FRACTION = 0.5  # local range ends at t_c / 2 (or T_J / 2)
+INTERMEDIATE_START = 3.0  # intermediate range starts at 3 t_c (or 3 T_J)
+CROSSOVER_PER_DECADE = 20  # grid of the two-segment fit, points per decade of t
+CROSSOVER_SUBSTEPS = 10  # candidate breakpoints per grid interval (0.005 decade apart)
+CROSSOVER_MIN_SIDE = 4  # grid points each segment holds at least
+CROSSOVER_MIN_DROP = 0.2  # log–log slope must fall by this (γ by 0.1) across the breakpoint
+CROSSOVER_DIRECTION = "x"  # the curve whose breakpoint sets the windows
 CONTACT_HEIGHT = 1.5  # d: a local minimum of the centre height below this is a bed contact
 DISCARDED_JUMPS = 10  # paper §3.2 (as run.py)
 N_BOOTSTRAP = 400
 RANGE_NAMES = ("local", "intermediate")
 TABLE_COLUMNS = ["direction", "range", "t_min", "t_max", "gamma", "ci_low", "ci_high", "alpha",
-                 "n_points", "n_particles", "n_origins", "source"]
+                 "n_points", "n_particles", "n_origins", "source", "windows_from", "t_c", "t_c_low", "t_c_high"]
+TRACK_COLUMNS = {"particle": "grain id", "t": "time, d/u*", "x": "streamwise position, unwrapped, d",
+                 "z": "spanwise position, unwrapped, d"}
 
 
 class DiffusionResult(dict):
-    """``{"local": {...}, "intermediate": {...}, "windows": {...}, "jump_duration": T_J, ...}``.
+    """``{"local": {...}, "intermediate": {...}, "windows": {...}, "windows_from": {...},
+    "crossover": {...}, "crossover_z": {...}, "jump_duration": T_J, "jump_duration_from": …}``.
 
     Each range entry holds gamma_x, gamma_z, their 95 % bootstrap intervals (ci_x, ci_z),
-    t_min, t_max (d/u*) and n_points. Attributes: ``table`` (tidy rows: direction, range,
-    t_min, t_max, gamma, ci_low, ci_high, alpha, n_points, n_particles, n_origins, source),
-    ``curves`` (lag t, var_x, var_z, n_origins) and ``problems`` (ranges that could not be
-    fitted, with the reason; empty unless ``strict=False``).
+    t_min, t_max (d/u*) and n_points. ``windows_from`` says per range what set its window
+    ("ranges", "jump_duration", "crossover" or "jump_duration (no crossover: …)");
+    ``crossover`` is the two-segment fit of ⟨X′²⟩ (:func:`crossover`), ``crossover_z`` that
+    of ⟨Z′²⟩ (reported only). ``jump_duration`` is T_J as given or found from the data
+    (None if unknown), ``jump_duration_from`` where it came from ("given", "jumps.parquet",
+    "bed contacts in the tracks" or None). Attributes: ``table`` (tidy rows: direction, range, t_min, t_max,
+    gamma, ci_low, ci_high, alpha, n_points, n_particles, n_origins, source, windows_from,
+    t_c, t_c_low, t_c_high), ``curves`` (lag t, var_x, var_z, n_origins) and ``problems``
+    (ranges that could not be fitted, with the reason; empty unless ``strict=False``).
     """
 
     table: pd.DataFrame
@@ -95,11 +134,60 @@ def _jump_duration_from_file(path: Path) -> float | None:
     return float(use["duration"].median()) if len(use) else None
 
 
+def _expected_columns() -> str:
+    return ", ".join(f"{k} ({v})" for k, v in TRACK_COLUMNS.items())
+
+
+def read_tracks_file(path, *, diameter: float = 1.0, time_scale: float = 1.0) -> pd.DataFrame:
+    """A tracks table from a CSV or Parquet file, in the units ``exponents`` takes.
+
+    Columns: particle, t, x, z required (y and any others optional and kept). t in d/u*,
+    x, z (and y) in d, x and z unwrapped (no periodic jumps); one row per grain and sample
+    time, every grain sampled at the same evenly spaced times. Other units: ``diameter``
+    is the grain diameter in the file's length unit (x, y, z are divided by it),
+    ``time_scale`` the time d/u* in the file's time unit (t is divided by it); γ does not
+    depend on them, t_c, the windows and α do. Sample times written with few digits are
+    snapped to the grid of the median spacing (within 1 % of a spacing).
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise AnalysisError(f"{path} is not a file")
+    suffix = path.suffix.lower()
+    if suffix == ".csv":
+        frame = pd.read_csv(path)
+    elif suffix in (".parquet", ".pq"):
+        frame = pd.read_parquet(path)
+    else:
+        raise AnalysisError(f"{path}: a tracks file must be .csv or .parquet (columns {_expected_columns()})")
+    frame.columns = [str(c).strip() for c in frame.columns]
+    missing = [c for c in TRACK_COLUMNS if c not in frame.columns]
+    if missing:
+        raise AnalysisError(f"{path} lacks column(s) {', '.join(missing)}: a tracks file needs {_expected_columns()}; "
+                            f"y (centre height, d) and others are optional. It has: {', '.join(frame.columns) or 'none'}")
+    if not (diameter > 0 and time_scale > 0):
+        raise AnalysisError(f"diameter = {diameter}, time_scale = {time_scale}: both must be positive")
+    bad = [c for c in ("t", "x", "z", "y") if c in frame.columns and not pd.api.types.is_numeric_dtype(frame[c])]
+    if bad:
+        raise AnalysisError(f"{path}: column(s) {', '.join(bad)} are not numeric")
+    frame = frame.copy()
+    frame["t"] = frame["t"].astype(float) / time_scale
+    for c in ("x", "y", "z"):
+        if c in frame.columns:
+            frame[c] = frame[c].astype(float) / diameter
+    times = np.unique(frame["t"].to_numpy())
+    if len(times) > 2:
+        dt = float(np.median(np.diff(times)))
+        k = (frame["t"].to_numpy() - times[0]) / dt
+        if dt > 0 and np.max(np.abs(k - np.round(k))) < 0.01:
+            frame["t"] = times[0] + np.round(k) * dt
+    return frame
+
+
 def _tracks_grid(tracks: pd.DataFrame):
     """x, z (P, J) arrays on the uniform sample grid of the tracks, and its spacing."""
-    missing = [c for c in ("particle", "t", "x", "z") if c not in tracks.columns]
+    missing = [c for c in TRACK_COLUMNS if c not in tracks.columns]
     if missing:
-        raise AnalysisError(f"the tracks lack column(s) {missing}: need particle, t, x, z (x, z unwrapped, in d; t in d/u*)")
+        raise AnalysisError(f"the tracks lack column(s) {missing}: need {_expected_columns()}")
     if len(tracks) == 0:
         raise AnalysisError("the tracks are empty: no sampled positions; run with output.tracks = true "
                             "(or output.variance = true for variance.parquet)")
@@ -152,20 +240,106 @@ def _fit_slopes(logt: np.ndarray, logv: np.ndarray) -> np.ndarray:
     return ((logv - logv.mean(axis=-1, keepdims=True)) @ tc) / (tc @ tc)
 
 
-def _auto_ranges(t_first: float, t_max: float, jump_duration: float | None, given: dict) -> tuple[dict, dict]:
-    ranges, problems = {}, {}
+def crossover(t, var, boot=None, *, direction: str = CROSSOVER_DIRECTION) -> dict:
+    """Ballistic-to-intermediate crossover of a variance curve: the breakpoint t_c of a
+    continuous two-segment least-squares fit of log ``var`` against log ``t``.
+
+    The curve is interpolated (linearly in log–log) onto the grid t = 10^(k/20) inside its
+    span, so the fit weighs each decade alike whatever the lags; candidate breakpoints lie
+    0.005 decade apart with at least ``CROSSOVER_MIN_SIDE`` grid points on each side.
+    ``boot`` (B, len(t)): bootstrap replicates of the curve, refitted for the 95 %
+    interval of t_c (replicates whose breakpoint falls at an end of the scan count as
+    no crossover). Returns {"found", "t_c", "ci" (2.5, 97.5 %), "gamma_before",
+    "gamma_after" (half the two slopes), "var_c" (the fit's value at t_c, d²: the segments are
+    var_c (t/t_c)^(2γ)), "fit_range", "n_points" (grid points),
+    "n_boot" (replicates with a crossover), "direction", "reason" (why none was found)}.
+    """
+    t, var = np.asarray(t, float), np.asarray(var, float)
+    out = {"direction": direction, "found": False, "t_c": None, "ci": (float("nan"), float("nan")),
+           "gamma_before": None, "gamma_after": None, "var_c": None, "fit_range": None, "n_points": 0, "n_boot": 0, "reason": ""}
+    ok = (t > 0) & (var > 0) & np.isfinite(var)
+    if ok.sum() < 2:
+        out["reason"] = "the variance curve has fewer than 2 positive points"
+        return out
+    lt, lv = np.log(t[ok]), np.log(var[ok])
+    k0 = int(np.ceil(CROSSOVER_PER_DECADE * lt[0] / np.log(10) - 1e-9))
+    k1 = int(np.floor(CROSSOVER_PER_DECADE * lt[-1] / np.log(10) + 1e-9))
+    grid = np.arange(k0, k1 + 1) * np.log(10) / CROSSOVER_PER_DECADE
+    n = len(grid)
+    out["n_points"] = n
+    if n < 2 * CROSSOVER_MIN_SIDE + 1:
+        out["reason"] = (f"the curve spans {lt[-1] / np.log(10) - lt[0] / np.log(10):.2f} decade(s) of t: a two-segment "
+                         f"fit needs at least {(2 * CROSSOVER_MIN_SIDE) / CROSSOVER_PER_DECADE:.2f}")
+        return out
+    out["fit_range"] = (float(np.exp(grid[0])), float(np.exp(grid[-1])))
+    interp = np.stack([np.interp(grid, lt, e) for e in np.eye(len(lt))], axis=1)  # (n, len(lt))
+    y = interp @ lv
+    ys = [y[None, :]]
+    if boot is not None and len(boot):
+        b = np.asarray(boot, float)[:, ok]
+        good = (b > 0).all(axis=1) & np.isfinite(b).all(axis=1)
+        if good.any():
+            ys.append(np.log(b[good]) @ interp.T)
+    yy = np.concatenate(ys)  # row 0: the curve, then the replicates
+    lo, hi = grid[CROSSOVER_MIN_SIDE - 1], grid[n - CROSSOVER_MIN_SIDE]
+    cands = np.linspace(lo, hi, max(2, round((hi - lo) / (grid[1] - grid[0]) * CROSSOVER_SUBSTEPS) + 1))
+    design = np.stack([np.ones((len(cands), n)), np.minimum(grid[None, :] - cands[:, None], 0.0),
+                       np.maximum(grid[None, :] - cands[:, None], 0.0)], axis=-1)  # (C, n, 3)
+    q, _ = np.linalg.qr(design)
+    proj = np.einsum("bn,cnk->bck", yy, q)
+    sse = (yy * yy).sum(axis=1)[:, None] - (proj * proj).sum(axis=-1)  # (B+1, C)
+    best = np.argmin(sse, axis=1)
+    interior = (best > 0) & (best < len(cands) - 1)
+    c = cands[best[0]]
+    coef, *_ = np.linalg.lstsq(design[best[0]], y, rcond=None)
+    out["gamma_before"], out["gamma_after"] = 0.5 * float(coef[1]), 0.5 * float(coef[2])
+    out["var_c"] = float(np.exp(coef[0]))
+    tb = np.exp(cands[best[1:][interior[1:]]])
+    out["n_boot"] = len(tb)
+    if len(tb) >= 20:
+        out["ci"] = tuple(float(v) for v in np.percentile(tb, [2.5, 97.5]))
+    if not interior[0]:
+        end = "first" if best[0] == 0 else "last"
+        out["reason"] = (f"the two-segment fit of ⟨{direction.upper()}′²⟩ puts its breakpoint at the {end} admissible "
+                         f"lag ({np.exp(c):.3g} d/u*): no bend from the ballistic to the intermediate range within "
+                         f"{out['fit_range'][0]:.3g}–{out['fit_range'][1]:.3g} d/u* (a record too short, or sampled too "
+                         "coarsely)")
+        return out
+    drop = coef[1] - coef[2]
+    if drop < CROSSOVER_MIN_DROP:
+        out["reason"] = (f"the log–log slope of ⟨{direction.upper()}′²⟩ changes from {coef[1]:.2f} to {coef[2]:.2f} "
+                         f"across the best breakpoint ({np.exp(c):.3g} d/u*): no drop of at least {CROSSOVER_MIN_DROP} "
+                         "from a ballistic to an intermediate range")
+        return out
+    out["found"], out["t_c"] = True, float(np.exp(c))
+    return out
+
+
+def _auto_ranges(t_first: float, t_max: float, jump_duration: float | None, given: dict,
+                 cross: dict | None = None, jump_given: bool = False) -> tuple[dict, dict, dict]:
+    """Windows of the ranges (the module docstring's rule), the problems, and per range
+    what set its window."""
+    ranges, problems, origin = {}, {}, {}
     for name in RANGE_NAMES:
         if name in given and given[name] is not None:
             continue
-        if jump_duration is None:
-            problems[name] = ("the typical jump duration could not be found (no jumps.parquet and no bed contacts "
-                              "in the tracks): give ranges={'local': (t0, t1), 'intermediate': (t2, t3)} in d/u* "
-                              "or jump_duration=")
+        if jump_given:
+            scale, origin[name] = jump_duration, "jump_duration"
+        elif cross is not None and cross["found"]:
+            scale, origin[name] = cross["t_c"], "crossover"
+        elif jump_duration is not None:
+            why = cross["reason"] if cross is not None else "not fitted"
+            scale, origin[name] = jump_duration, f"jump_duration (no crossover: {why})"
+        else:
+            why = f"no ballistic-to-intermediate crossover in ⟨X′²⟩ ({cross['reason']}), and " if cross else ""
+            problems[name] = (why + "the typical jump duration could not be found (no jumps.parquet and no bed "
+                              "contacts in the tracks): give ranges={'local': (t0, t1), 'intermediate': (t2, t3)} in "
+                              "d/u* or jump_duration=")
             continue
         if name == "local":
-            ranges[name] = (t_first, LOCAL_FRACTION * jump_duration)
+            ranges[name] = (t_first, LOCAL_FRACTION * scale)
         else:
-            ranges[name] = (INTERMEDIATE_START * jump_duration, t_max)
+            ranges[name] = (INTERMEDIATE_START * scale, t_max)
     for name, win in given.items():
         if win is None:
             continue
@@ -173,7 +347,8 @@ def _auto_ranges(t_first: float, t_max: float, jump_duration: float | None, give
         if not (0 < lo < hi):
             raise AnalysisError(f"ranges[{name!r}] = {win!r}: must be (t_min, t_max) in d/u* with 0 < t_min < t_max")
         ranges[name] = (lo, hi)
-    return ranges, problems
+        origin[name] = "ranges"
+    return ranges, problems, origin
 
 
 def exponents(tracks, ranges=None, *, jump_duration: float | None = None, n_bootstrap: int = N_BOOTSTRAP,
@@ -182,11 +357,14 @@ def exponents(tracks, ranges=None, *, jump_duration: float | None = None, n_boot
 
     ``tracks``: a tracks DataFrame (t in d/u*, x, z unwrapped in d) or a run directory.
     ``ranges``: ``{"local": (t_min, t_max), "intermediate": (t_min, t_max)}`` in d/u*; a
-    range left out is set from the typical jump duration T_J (``jump_duration`` or found
-    from the data). ``strict``: raise :class:`AnalysisError` when a range cannot be fitted
+    range left out is set from ``jump_duration`` (T_J, d/u*) when given, else from the
+    crossover t_c of ⟨X′²⟩ (:func:`crossover`), else from T_J found in the data (the module
+    docstring's rule). ``strict``: raise :class:`AnalysisError` when a range cannot be fitted
     (default); with ``strict=False`` such ranges are left out and ``result.problems`` says why.
     """
     given = dict(ranges or {})
+    jump_given = jump_duration is not None
+    jump_from = "given" if jump_given else None
     source = "tracks"
     if isinstance(tracks, (str, Path)):
         run_dir = Path(tracks)
@@ -194,6 +372,7 @@ def exponents(tracks, ranges=None, *, jump_duration: float | None = None, n_boot
             raise AnalysisError(f"{run_dir} is not a run directory")
         if jump_duration is None and (run_dir / "jumps.parquet").exists():
             jump_duration = _jump_duration_from_file(run_dir / "jumps.parquet")
+            jump_from = "jumps.parquet" if jump_duration is not None else None
         if (run_dir / VARIANCE_FILE).exists():
             sums, lags, meta = read_sums(run_dir / VARIANCE_FILE)
             source = VARIANCE_FILE
@@ -204,6 +383,7 @@ def exponents(tracks, ranges=None, *, jump_duration: float | None = None, n_boot
             frame = pd.read_parquet(run_dir / "tracks.parquet", columns=["particle", "t", "x", "y", "z"])
             if jump_duration is None:
                 jump_duration = jump_duration_from_tracks(frame)
+                jump_from = "bed contacts in the tracks" if jump_duration is not None else None
             sums, lags, meta = sums_from_tracks(frame, n_origins=n_origins)
             source = "tracks.parquet"
         else:
@@ -212,6 +392,7 @@ def exponents(tracks, ranges=None, *, jump_duration: float | None = None, n_boot
     elif isinstance(tracks, pd.DataFrame):
         if jump_duration is None and not all(n in given for n in RANGE_NAMES):
             jump_duration = jump_duration_from_tracks(tracks) if len(tracks) else None
+            jump_from = "bed contacts in the tracks" if jump_duration is not None else None
         sums, lags, meta = sums_from_tracks(tracks, n_origins=n_origins)
     elif tracks is None:
         raise AnalysisError("no tracks given: pass a tracks DataFrame or a run directory")
@@ -228,7 +409,6 @@ def exponents(tracks, ranges=None, *, jump_duration: float | None = None, n_boot
     t_first, t_last = float(curves["t"].iloc[0]), float(curves["t"].iloc[-1])
     dt = float(meta["dt"])
     n_particles = int(meta["n_particles"])
-    win, problems = _auto_ranges(t_first, t_last, jump_duration, given)
 
     # bootstrap weights over groups of grains (groups = grains unless variance.parquet pooled them)
     rng = np.random.default_rng(seed)
@@ -240,14 +420,20 @@ def exponents(tracks, ranges=None, *, jump_duration: float | None = None, n_boot
     keep = np.isin(lags, curves["t"].to_numpy())
     bx, bz = bx[:, keep], bz[:, keep]
 
+    t = curves["t"].to_numpy()
+    cross = crossover(t, curves["var_x"].to_numpy(), bx, direction="x")
+    cross_z = crossover(t, curves["var_z"].to_numpy(), bz, direction="z")
+    win, problems, origin = _auto_ranges(t_first, t_last, jump_duration, given, cross, jump_given)
+    t_c_row = {"t_c": cross["t_c"] if cross["found"] else float("nan"), "t_c_low": cross["ci"][0],
+               "t_c_high": cross["ci"][1]}
+
     result = DiffusionResult()
     rows = []
-    t = curves["t"].to_numpy()
     for name, (lo, hi) in win.items():
         sel = (t >= lo * (1 - 1e-9)) & (t <= hi * (1 + 1e-9))
         npts = int(sel.sum())
         if npts < MIN_POINTS:
-            problems[name] = _too_few_points(name, lo, hi, npts, dt, t_last, jump_duration)
+            problems[name] = _too_few_points(name, lo, hi, npts, dt, t_last, _basis(origin[name], jump_duration, cross))
             continue
         vx, vz = curves["var_x"].to_numpy()[sel], curves["var_z"].to_numpy()[sel]
         if (vx <= 0).any() or (vz <= 0).any():
@@ -272,12 +458,17 @@ def exponents(tracks, ranges=None, *, jump_duration: float | None = None, n_boot
             entry[f"alpha_{direction}"] = alpha
             rows.append({"direction": direction, "range": name, "t_min": entry["t_min"], "t_max": entry["t_max"],
                          "gamma": gamma, "ci_low": lo_ci, "ci_high": hi_ci, "alpha": alpha, "n_points": npts,
-                         "n_particles": n_particles, "n_origins": int(curves["n_origins"][sel].min()), "source": source})
+                         "n_particles": n_particles, "n_origins": int(curves["n_origins"][sel].min()), "source": source,
+                         "windows_from": origin[name], **t_c_row})
         result[name] = entry
     if problems and strict:
         raise AnalysisError("; ".join(f"{k}: {v}" for k, v in problems.items()))
     result["windows"] = {k: v for k, v in win.items()}
+    result["windows_from"] = dict(origin)
+    result["crossover"] = cross
+    result["crossover_z"] = cross_z
     result["jump_duration"] = jump_duration
+    result["jump_duration_from"] = jump_from
     result["sample_interval"] = dt
     result["n_particles"] = n_particles
     result["source"] = source
@@ -287,9 +478,17 @@ def exponents(tracks, ranges=None, *, jump_duration: float | None = None, n_boot
     return result
 
 
-def _too_few_points(name, lo, hi, npts, dt, t_last, jump_duration) -> str:
+def _basis(origin: str, jump_duration, cross) -> str:
+    """What a window was scaled by, for messages."""
+    if origin == "crossover":
+        return f", crossover t_c = {cross['t_c']:.3g} d/u*"
+    if origin.startswith("jump_duration") and jump_duration:
+        return f", T_J = {jump_duration:.3g} d/u*"
+    return ""
+
+
+def _too_few_points(name, lo, hi, npts, dt, t_last, tj) -> str:
     need = f"at least {MIN_POINTS} are needed"
-    tj = f", T_J = {jump_duration:.3g} d/u*" if jump_duration else ""
     if hi >= t_last * (1 - 1e-9) or lo > t_last:
         # bounded by the longest lag: 5 lags at 20 per decade span a factor 1.6, and the
         # longest lag is 0.45 of the record (half of what follows the 10 % skip)

@@ -1,4 +1,4 @@
-"""``saltation analyze RUN_OR_SWEEP_DIR``: tables, figures and one self-contained HTML report.
+"""``saltation analyze PATH``: tables, figures and one self-contained HTML report.
 
 A **run directory** (summary.json, jumps.parquet, variance.parquet and/or tracks.parquet)
 gives: the jump statistics table, the jump length / height / velocity distributions, the
@@ -14,6 +14,13 @@ the paper's values and the differences). Single-grain validation results
 (``saltation validate nino-garcia`` output: validation.csv, validation.png, ablation.csv)
 are included when a validation directory is given or found (DIR/validation,
 DIR/../validation).
+
+A **tracks file** (CSV or Parquet: particle, t in d/u*, x and z unwrapped in d, y
+optional — e.g. grains tracked in a flume, or another model's output;
+``diffusion.read_tracks_file`` explains the columns and the unit options) gives the
+diffusion part: the exponents table, the crossover of the variance curves, the variance
+figure with the fitted ranges and the two-segment fit, in ``<stem>_analysis/`` next to the
+file (or ``--out``).
 
 Everything lands in ``DIR/analysis`` (or ``--out``): CSV tables, PNG figures, report.html
 (figures embedded as base64, no external files). A range that cannot be fitted appears
@@ -32,7 +39,7 @@ import numpy as np
 import pandas as pd
 
 from . import reference as ref
-from .diffusion import DISCARDED_JUMPS, RANGE_NAMES, exponents
+from .diffusion import DISCARDED_JUMPS, RANGE_NAMES, TRACK_COLUMNS, exponents, read_tracks_file
 from .variance import AnalysisError
 
 JUMP_QUANTITIES = (("length", "L", "d"), ("height", "H", "d"), ("duration", "T", "d/u*"), ("velocity", "U", "u*"))
@@ -117,6 +124,10 @@ def case_row(run_dir: Path) -> dict:
         row["collisions_pp_per_particle_per_time"] = row["collisions_pp"] / s["n_particles"] / dur
     res, problems = diffusion_of(run_dir)
     row["jump_duration"] = res["jump_duration"] if res is not None else None
+    cr = res["crossover"] if res is not None else None
+    row["t_c"] = cr["t_c"] if cr and cr["found"] else None
+    row["t_c_ci"] = f"{cr['ci'][0]:.3g}–{cr['ci'][1]:.3g}" if cr and cr["found"] and np.isfinite(cr["ci"][0]) else None
+    row["windows_from"] = "; ".join(f"{k}: {v}" for k, v in res["windows_from"].items()) if res is not None else None
     for name in RANGE_NAMES:
         for d in ("x", "z"):
             e = res.get(name) if res is not None else None
@@ -177,8 +188,23 @@ def fig_variance(res, path: Path, title=""):
             lo, hi = e[f"ci_{d}"]
             ax.loglog(tt, a * tt ** (2 * g), "-", lw=2, color=color,
                       label=f"{name}: γ{d} = {g:.2f} [{lo:.2f}, {hi:.2f}]")
+        cr = res.get("crossover" if d == "x" else "crossover_z")
+        if cr and cr.get("found"):
+            tc, (lo, hi) = cr["t_c"], cr["ci"]
+            for a0, a1, g in ((cr["fit_range"][0], tc, cr["gamma_before"]), (tc, cr["fit_range"][1], cr["gamma_after"])):
+                tt = np.geomspace(a0, a1, 20)
+                ax.loglog(tt, cr["var_c"] * (tt / tc) ** (2 * g), "--", lw=1, color="k", zorder=3,
+                          label="two-segment fit" if a0 < tc else None)
+            if np.isfinite(lo):
+                ax.axvspan(lo, hi, color="#999999", alpha=0.25, lw=0)
+            sets = d == "x" and "crossover" in res.get("windows_from", {}).values()
+            ci = f" [{lo:.2f}, {hi:.2f}]" if np.isfinite(lo) else ""
+            ax.axvline(tc, color="k", ls="-", lw=0.8,
+                       label=f"t_c = {tc:.2f}{ci} d/u*" + (" (sets the ranges)" if sets else " (not used)"))
         if res.get("jump_duration"):
-            ax.axvline(res["jump_duration"], color="k", ls=":", lw=1, label=f"T_J = {res['jump_duration']:.2f} d/u*")
+            src = res.get("jump_duration_from")
+            ax.axvline(res["jump_duration"], color="k", ls=":", lw=1,
+                       label=f"T_J = {res['jump_duration']:.2f} d/u*" + (f" ({src})" if src else ""))
         ax.set_xlabel("t (d/u*)")
         ax.set_ylabel(f"{label} (d²)")
         ax.legend(fontsize=8)
@@ -199,8 +225,11 @@ def fig_run_costs(summary: dict, path: Path):
     axes[0].set_title(f"cost (wall {t.get('wall_s', 0):.1f} s)", fontsize=9)
     cc = {"grain–grain": col.get("particle_particle") or 0, "bed": col.get("bed") or 0}
     axes[1].bar(list(cc), list(cc.values()), color="#ee7733")
-    axes[1].set_ylabel("collisions")
-    axes[1].set_title(f"{col.get('per_particle', 0):.1f} bed collisions per grain", fontsize=9)
+    axes[1].set_ylabel("collisions in the run (total)")
+    n = summary.get("n_particles") or 0
+    bed_pp = col.get("bed_per_particle", (col.get("bed") or 0) / n if n else 0.0)
+    axes[1].set_title(f"per grain: {col.get('per_particle') or 0:.1f} grain–grain, {bed_pp or 0:.1f} bed collisions",
+                      fontsize=9)
     return _save(fig, path)
 
 
@@ -233,13 +262,16 @@ def fig_velocity_boxes(runs: list[Path], df: pd.DataFrame, path: Path):
     data, labels = [], []
     order = df.sort_values(["tau_ratio", "concentration_pct"])["case"].tolist()
     by_name = {r.name: r for r in runs}
+    no_tracks = []
     for name in order:
         j = counted_jumps(by_name[name])
         row = df.set_index("case").loc[name]
         data.append(j["velocity"].to_numpy())
         labels.append(f"{row['concentration_pct']:.2g}%\n{row['tau_ratio']:.2f}")
         tracks = by_name[name] / "tracks.parquet"
-        if tracks.exists():
+        if not tracks.exists():
+            no_tracks.append(name)
+        else:
             u = pd.read_parquet(tracks, columns=["u", "y"])
             u = u[u["y"] > 0.55]["u"].to_numpy()  # grains in flight (centre above the resting height 0.5 d)
             if len(u):
@@ -250,7 +282,17 @@ def fig_velocity_boxes(runs: list[Path], df: pd.DataFrame, path: Path):
     axes[0].set_xlabel("C, τ*/τ*c")
     axes[1].set_xlabel("grain streamwise velocity u (u*), grains in flight")
     axes[1].set_ylabel("probability density")
-    axes[1].legend(fontsize=7)
+    if axes[1].get_legend_handles_labels()[0]:
+        axes[1].legend(fontsize=7)
+    if no_tracks:
+        why = (f"no tracks.parquet in {len(no_tracks)} of {len(order)} case(s)"
+               + (f" ({', '.join(no_tracks[:4])}{', …' if len(no_tracks) > 4 else ''})" if len(no_tracks) < len(order) else "")
+               + ":\nthe grain-velocity distribution needs the tracks;\nrun with output.tracks = true")
+        empty = not axes[1].get_legend_handles_labels()[0]
+        axes[1].text(0.5, 0.5 if empty else 0.97, why, transform=axes[1].transAxes, ha="center",
+                     va="center" if empty else "top", fontsize=9 if empty else 7, color="#a33")
+        if empty:
+            axes[1].set_yticks([])
     fig.suptitle("velocity distributions (cf. paper Fig. 6)", fontsize=10)
     return _save(fig, path)
 
@@ -280,6 +322,15 @@ def fig_collisions_cost(df: pd.DataFrame, path: Path):
     return _save(fig, path)
 
 
+def _why(df: pd.DataFrame, cases: list) -> str:
+    """The diffusion problem of the first of ``cases``, wrapped for a figure."""
+    import textwrap
+
+    probs = df.set_index("case")["diffusion_problems"] if "diffusion_problems" in df else {}
+    why = str(probs.get(cases[0], "") or "no diffusion data").removeprefix("all: ")
+    return textwrap.fill(why if len(why) <= 200 else why[:197] + "…", 60)
+
+
 def fig_variance_sweep(results: dict, df: pd.DataFrame, path: Path):
     plt = _plt()
     fig, axes = plt.subplots(1, 2, figsize=(11, 4))
@@ -291,10 +342,19 @@ def fig_variance_sweep(results: dict, df: pd.DataFrame, path: Path):
         for ax, d in zip(axes, ("x", "z")):
             ax.loglog(res.curves["t"], res.curves[f"var_{d}"], "-", lw=1.2,
                       label=f"C = {row['concentration_pct']:.2g} %, τ*/τ*c = {row['tau_ratio']:.2f}")
+    missing = [n for n in df["case"] if results.get(n) is None]
     for ax, d in zip(axes, ("X", "Z")):
         ax.set_xlabel("t (d/u*)")
         ax.set_ylabel(f"⟨{d}′²⟩ (d²)")
-        ax.legend(fontsize=7)
+        if ax.get_legend_handles_labels()[0]:
+            ax.legend(fontsize=7)
+        if missing:
+            empty = len(missing) == len(df)
+            ax.text(0.5, 0.5 if empty else 0.03, f"no variance curves for {len(missing)} of {len(df)} case(s)"
+                    + ("" if empty else f" ({', '.join(missing[:4])}{', …' if len(missing) > 4 else ''})")
+                    + ":\n" + _why(df, missing),
+                    transform=ax.transAxes, ha="center", va="center" if empty else "bottom",
+                    fontsize=9 if empty else 7, color="#a33")
     fig.suptitle("displacement variances of every case (cf. paper Fig. 8)", fontsize=10)
     return _save(fig, path)
 
@@ -434,12 +494,25 @@ def _validation_section(vdir: Path | None) -> list[str]:
 
 
 # --------------------------------------------------------------------------- entry points
-def analyze(path, out=None, validation=None) -> dict:
-    """Analyse a run or sweep directory; returns {"kind", "out", "report", "tables": {...}}."""
+TRACK_SUFFIXES = (".csv", ".parquet", ".pq")
+
+
+def analyze(path, out=None, validation=None, *, diameter: float = 1.0, time_scale: float = 1.0) -> dict:
+    """Analyse a run directory, a sweep directory or a tracks file (CSV/Parquet);
+    returns {"kind" ("run" | "sweep" | "tracks"), "out", "report", "tables": {...}, …}.
+    ``diameter``, ``time_scale``: units of a tracks file (:func:`read_tracks_file`)."""
     path = Path(path)
+    if path.is_file():
+        if path.suffix.lower() not in TRACK_SUFFIXES:
+            raise AnalysisError(f"{path} is a file but not a tracks file (.csv or .parquet with columns "
+                                f"{', '.join(f'{k} ({v})' for k, v in TRACK_COLUMNS.items())})")
+        return analyze_tracks_file(path, Path(out) if out else None, diameter=diameter, time_scale=time_scale)
     if not path.is_dir():
-        raise AnalysisError(f"{path} is not a directory: give a run directory (with summary.json) or a sweep "
-                            f"directory (with cases/NAME/summary.json)")
+        raise AnalysisError(f"{path} is not a directory nor a file: give a run directory (with summary.json), a sweep "
+                            f"directory (with cases/NAME/summary.json) or a tracks file (.csv or .parquet with columns "
+                            f"particle, t, x, z)")
+    if (diameter, time_scale) != (1.0, 1.0):
+        raise AnalysisError("diameter / time_scale convert a tracks file's units; a run directory is already in d and d/u*")
     out = Path(out) if out else path / "analysis"
     out.mkdir(parents=True, exist_ok=True)
     vdir = _validation_dir(path, validation)
@@ -467,17 +540,7 @@ def analyze_run(run_dir: Path, out: Path, vdir=None) -> dict:
     sections.append(("Jump statistics (first %d jumps of each grain dropped)" % DISCARDED_JUMPS, parts))
 
     res, problems = diffusion_of(run_dir)
-    parts = []
-    if res is not None:
-        res.table.to_csv(out / "diffusion.csv", index=False)
-        res.curves.to_csv(out / "variance_curves.csv", index=False)
-        parts += [_p(f"source {res['source']}; typical jump duration T_J = "
-                     + (f"{res['jump_duration']:.3g} d/u*" if res["jump_duration"] else "not found")
-                     + f"; samples every {res['sample_interval']:.3g} d/u*; γ from least squares on log–log axes, "
-                       "95 % bootstrap intervals over grains"), _table(res.table)]
-        parts.append(_img(fig_variance(res, out / "variance.png")))
-    for k, v in problems.items():
-        parts.append(_p(f"{k}: {v}", "note"))
+    parts = _diffusion_parts(res, problems, out)
     sections.append(("Diffusion (cf. paper Fig. 8)", parts))
 
     flat = pd.json_normalize({k: s[k] for k in ("collisions", "timing") if k in s}, sep=".").T.reset_index()
@@ -489,6 +552,73 @@ def analyze_run(run_dir: Path, out: Path, vdir=None) -> dict:
     report.write_text(_html(f"saltation run {run_dir.name}", sections))
     return {"kind": "run", "out": out, "report": report, "diffusion": res, "problems": problems,
             "tables": {"jump_stats": jt}}
+
+
+def crossover_table(res) -> pd.DataFrame:
+    """The two-segment fits of ⟨X′²⟩ and ⟨Z′²⟩: breakpoint t_c (d/u*), its 95 % bootstrap
+    interval, the γ of each segment, the span fitted, and whether t_c set the ranges."""
+    rows = []
+    used = "crossover" in res["windows_from"].values()
+    for key in ("crossover", "crossover_z"):
+        c = res[key]
+        rows.append({"direction": c["direction"], "t_c": c["t_c"] if c["found"] else None, "ci_low": c["ci"][0],
+                     "ci_high": c["ci"][1], "gamma_before": c["gamma_before"], "gamma_after": c["gamma_after"],
+                     "fit_t_min": c["fit_range"][0] if c["fit_range"] else None,
+                     "fit_t_max": c["fit_range"][1] if c["fit_range"] else None, "n_boot": c["n_boot"],
+                     "sets_ranges": bool(used and key == "crossover"), "note": c["reason"]})
+    return pd.DataFrame(rows)
+
+
+def windows_text(res) -> str:
+    """One line: what set the ranges, t_c, and T_J as the cross-check."""
+    c = res["crossover"]
+    if c["found"]:
+        lo, hi = c["ci"]
+        tc = f"crossover of ⟨X′²⟩ t_c = {c['t_c']:.3g}" + (f" [{lo:.3g}, {hi:.3g}]" if np.isfinite(lo) else "") + " d/u*"
+    else:
+        tc = f"no crossover found in ⟨X′²⟩ ({c['reason']})"
+    tj = (f"T_J = {res['jump_duration']:.3g} d/u* ({res['jump_duration_from']})" if res["jump_duration"]
+          else "T_J not known (no jumps.parquet, no bed contacts)")
+    frm = "; ".join(f"{k} from {v}" for k, v in res["windows_from"].items())
+    return f"ranges: {frm}. {tc}; {tj}"
+
+
+def _diffusion_parts(res, problems: dict, out: Path) -> list[str]:
+    parts = []
+    if res is not None:
+        res.table.to_csv(out / "diffusion.csv", index=False)
+        res.curves.to_csv(out / "variance_curves.csv", index=False)
+        ct = crossover_table(res)
+        ct.to_csv(out / "crossover.csv", index=False)
+        parts += [_p(f"source {res['source']}, {res['n_particles']} grains; samples every {res['sample_interval']:.3g} "
+                     "d/u*; γ from least squares on log–log axes, 95 % bootstrap intervals over grains. The local range "
+                     "ends at ½ t_c, the intermediate starts at 3 t_c, t_c being the breakpoint of a two-segment fit of "
+                     "log⟨X′²⟩ against log t (unless ranges or T_J are given; T_J is shown as a cross-check)."),
+                  _p(windows_text(res)), _table(res.table), _p("two-segment fits (breakpoint t_c, d/u*)"), _table(ct)]
+        parts.append(_img(fig_variance(res, out / "variance.png")))
+    for k, v in problems.items():
+        parts.append(_p(f"{k}: {v}", "note"))
+    return parts
+
+
+def analyze_tracks_file(path: Path, out: Path | None = None, *, diameter: float = 1.0, time_scale: float = 1.0) -> dict:
+    """Diffusion of a CSV/Parquet tracks file (no jumps, no summary): exponents, crossover,
+    variance figure and report in ``out`` (default ``<stem>_analysis/`` next to the file)."""
+    frame = read_tracks_file(path, diameter=diameter, time_scale=time_scale)
+    res = exponents(frame, strict=False)  # bad tracks raise; ranges that cannot be fitted are listed
+    problems = dict(res.problems)
+    out = out if out is not None else path.parent / f"{path.stem}_analysis"
+    out.mkdir(parents=True, exist_ok=True)
+    units = ("x, y, z in d and t in d/u* as read" if (diameter, time_scale) == (1.0, 1.0) else
+             f"x, y, z divided by d = {diameter:g} and t by d/u* = {time_scale:g} (file units)")
+    n_t = frame["t"].nunique()
+    head = (f"{res['n_particles']} grains × {n_t} samples every {res['sample_interval']:.3g} d/u* "
+            f"({(n_t - 1) * res['sample_interval']:.4g} d/u*); {units}")
+    parts = [_p(head)] + _diffusion_parts(res, problems, out)
+    report = out / "report.html"
+    report.write_text(_html(f"saltation tracks {path.name}", [("Diffusion (cf. paper Fig. 8)", parts)]))
+    return {"kind": "tracks", "out": out, "report": report, "diffusion": res, "problems": problems,
+            "tables": {"diffusion": res.table, "crossover": crossover_table(res)}}
 
 
 def analyze_sweep(sweep: Path, runs: list[Path], out: Path, vdir=None) -> dict:
