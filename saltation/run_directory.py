@@ -143,8 +143,9 @@ def claim_run_directory(path, *, resume: bool = False, overwrite: bool = False, 
             if not overwrite:
                 raise RunDirectoryError(
                     f"run directory {path} is not empty ({_describe(path, files)}); "
-                    f"use --resume to continue its run{'' if (path / checkpoint).exists() else ' (it has no checkpoint)'}, "
-                    f"--overwrite to replace it, or another --out")
+                    f"use --resume (Python: resume=True) to continue its run"
+                    f"{'' if (path / checkpoint).exists() else ' (it has no checkpoint)'}, "
+                    f"--overwrite (overwrite=True) to replace it, or another --out")
             _remove_outputs(path)
         yield path
     finally:

@@ -182,6 +182,7 @@ def drop_on_bed(offset_x, offset_z=0.0, speed=3.0, e=1.0, f=0.0):
     vel = np.array([0.0, -speed, 0.0])
     pos = x_hit + vel * (0.4 * dt)  # unresolved free flight for 40 % of the step after the hit
     st = make_state(pos[None, :], vel[None, :], np.zeros((1, 3)), 0.0, 4)
+    st.jump_t0[0], st.jump_ymax[0] = -3.0, 2.0  # in flight since 3 d/u*, up to 1.5 d: a hop ends here
     ws = make_workspace(1)
     ws.x0[0, :3] = pos - vel * dt
     last = np.full(1, -2, np.int64)

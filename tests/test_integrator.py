@@ -100,7 +100,10 @@ def test_no_grain_ends_below_the_bed_and_jumps_are_recorded(tmp_path):
     assert len(jumps) > 40
     assert (jumps["duration"] > 0).all() and (jumps["height"] >= 0).all()
     np.testing.assert_allclose(jumps["velocity"], jumps["length"] / jumps["duration"])
-    assert res.summary["collisions"]["bed"] == len(jumps)
+    # every jump ends at a bed contact; contacts within one contact episode (jumps.py) end none
+    bed = res.summary["collisions"]["bed"]
+    assert len(jumps) <= bed and len(jumps) > 0.8 * bed
+    assert jumps["duration"].min() >= res.summary["dt_particle"]
 
 
 def test_same_seed_and_threads_reproduce_a_run_bit_for_bit(tmp_path):
