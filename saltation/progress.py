@@ -6,7 +6,6 @@ a long run does not fill its log with redraws.
 """
 from __future__ import annotations
 
-import contextlib
 import json
 import sys
 import threading
@@ -30,39 +29,59 @@ COMPILE_ESTIMATE_S = {"spheres": 200.0, "composites": 280.0}
 COMPILE_HEARTBEAT_S = 30.0  # a line this often while the compiler works
 
 
-@contextlib.contextmanager
-def compile_notice(enabled: bool, family: str = "spheres"):
-    """Around the first kernel call of a run: when this installation's Numba cache has no
-    compiled kernels for ``family`` yet, say so on stderr before (with the expected time),
-    every COMPILE_HEARTBEAT_S while it lasts, and when it is done; the measured time is kept
-    in the cache directory, so the next notice quotes it. Silent when the cache is warm."""
-    import numba
+class compile_notice:  # noqa: N801  (used as a context manager, like a function)
+    """Around a run's set-up and first kernel call: when this installation's Numba cache has
+    no compiled kernels for ``family`` yet, say so on stderr at the start (with the expected
+    time) and every COMPILE_HEARTBEAT_S while it lasts; ``done()`` (called after the first
+    kernel call, or on leaving the block without an error) says how long it took and keeps
+    that in the cache directory, so later runs stay silent. Silent when the cache is warm
+    or ``enabled`` is false (--quiet)."""
 
-    marker = Path(numba.config.CACHE_DIR) / f"compiled-{family}.json"
-    if not enabled or marker.exists():
-        yield
-        return
-    estimate = COMPILE_ESTIMATE_S.get(family, 200.0)
-    print(f"saltation: compiling the {family} kernels, once per installation of this version "
-          f"(~{estimate:.0f} s on a 2-core machine; later runs start at once)", file=sys.stderr, flush=True)
-    t0 = time.perf_counter()
-    done = threading.Event()
+    def __init__(self, enabled: bool, family: str = "spheres"):
+        import numba
 
-    def heartbeat():
-        while not done.wait(COMPILE_HEARTBEAT_S):
-            print(f"saltation: still compiling ({time.perf_counter() - t0:.0f} s)", file=sys.stderr, flush=True)
+        self.family = family
+        self.marker = Path(numba.config.CACHE_DIR) / f"compiled-{family}.json"
+        self.active = bool(enabled) and not self.marker.exists()
+        self._done = threading.Event()
+        self._beat = None
 
-    beat = threading.Thread(target=heartbeat, daemon=True)
-    beat.start()
-    try:
-        yield
-    finally:
-        done.set()
-        beat.join()
-    seconds = time.perf_counter() - t0
-    print(f"saltation: kernels compiled in {seconds:.0f} s", file=sys.stderr, flush=True)
-    try:
-        marker.parent.mkdir(parents=True, exist_ok=True)
-        marker.write_text(json.dumps({"seconds": seconds}))
-    except OSError:  # a read-only cache: the notice simply comes again
-        pass
+    def __enter__(self):
+        if self.active:
+            estimate = COMPILE_ESTIMATE_S.get(self.family, 200.0)
+            print(f"saltation: compiling the {self.family} kernels, once per installation of this version "
+                  f"(~{estimate:.0f} s on a 2-core machine; later runs start at once)", file=sys.stderr, flush=True)
+            self._t0 = time.perf_counter()
+            self._beat = threading.Thread(target=self._heartbeat, daemon=True)
+            self._beat.start()
+        return self
+
+    def _heartbeat(self):
+        while not self._done.wait(COMPILE_HEARTBEAT_S):
+            print(f"saltation: still compiling ({time.perf_counter() - self._t0:.0f} s)", file=sys.stderr, flush=True)
+
+    def _stop(self):
+        self._done.set()
+        if self._beat is not None:
+            self._beat.join()
+            self._beat = None
+
+    def done(self):
+        """The kernels are compiled: report the time and remember it (once)."""
+        if not self.active or self._done.is_set():
+            return
+        self._stop()
+        seconds = time.perf_counter() - self._t0
+        print(f"saltation: kernels compiled in {seconds:.0f} s", file=sys.stderr, flush=True)
+        try:
+            self.marker.parent.mkdir(parents=True, exist_ok=True)
+            self.marker.write_text(json.dumps({"seconds": seconds}))
+        except OSError:  # a read-only cache: the notice simply comes again
+            pass
+
+    def __exit__(self, kind, value, tb):
+        if kind is None:
+            self.done()
+        else:  # interrupted or failed while compiling: stop the heartbeat, remember nothing
+            self._stop()
+        return False
