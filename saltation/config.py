@@ -545,8 +545,9 @@ class OutputConfig(_Table):
     variance_origins: int = _key(8, kind="int", ge=1,
                                  doc="time origins the displacement variances are averaged over")
     checkpoint_every: float = _key(600.0, kind="float", unit="s", ge=0.0,
-                                   doc="wall-clock seconds between checkpoints (run.py; "
-                                       "0: none by time); SIGINT/SIGTERM always write one")
+                                   doc="wall-clock seconds between checkpoints (simulation.py; "
+                                       "0: none by time); every 5 % of the steps and SIGINT/SIGTERM "
+                                       "always write one")
     checkpoint_steps: int = _key(0, kind="int", ge=0,
                                  doc="also checkpoint every this many time steps (0: none "
                                      "by steps)")
