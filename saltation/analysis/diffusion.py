@@ -61,6 +61,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from ..statistics import DISCARDED_JUMPS  # paper §3.2, as the run's statistics
 from .variance import (VARIANCE_FILE, AnalysisError, VarianceAccumulator, make_plan, read_sums,
                        variance_curves)
 
@@ -77,7 +78,6 @@ CROSSOVER_MIN_SIDE = 4  # grid points each segment holds at least
 CROSSOVER_MIN_DROP = 0.2  # log–log slope must fall by this (γ by 0.1) across the breakpoint
 CROSSOVER_DIRECTION = "x"  # the curve whose breakpoint sets the windows
 CONTACT_HEIGHT = 1.5  # d: a local minimum of the centre height below this is a bed contact
-DISCARDED_JUMPS = 10  # paper §3.2 (as run.py)
 N_BOOTSTRAP = 400
 RANGE_NAMES = ("local", "intermediate")
 TABLE_COLUMNS = ["direction", "range", "t_min", "t_max", "gamma", "ci_low", "ci_high", "alpha",
