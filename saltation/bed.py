@@ -66,9 +66,9 @@ SECOND_IMPACT = 4        # flag OR-ed into bed_rebound's code; branch = code & 3
 
 MAX_TILT = math.radians(30.0)
 # the bed parameter array every bed kernel takes (bed_parameters): restitution, friction,
-# max tilt (rad), bed model (0 virtual; clusters.BED_PACKED), then the jump thresholds of jumps.py
-BED_RESTITUTION, BED_FRICTION, BED_MAX_TILT, BED_MODEL = 0, 1, 2, 3
-BED_PARAMETER_COUNT = 6
+# max tilt (rad), bed model (slot BED_MODEL: 0 virtual, clusters.BED_PACKED), then the jump
+# thresholds (slots jumps.BED_MIN_JUMP_DURATION, BED_MIN_JUMP_HEIGHT)
+BED_MODEL = 3
 
 
 def bed_parameters(restitution, friction, max_tilt=MAX_TILT, *, model=0.0, min_jump_duration=0.0,

@@ -246,7 +246,6 @@ class ClusterSimulation:
         out[:, 1] = bottom + placed[:, 1]
         return out
 
-
     # ------------------------------------------------------------------ main loop
     def run(self):
         from .progress import progress_bar

@@ -27,14 +27,13 @@ from .config import Case, dump_toml, load_case, resolve_domain
 from .forces import make_coefficients
 from .initial import initial_conditions, initial_conditions_apart
 from .integrator import NOT_FINITE, make_state, make_workspace
-from .statistics import DISCARDED_JUMPS, empty_rows, jump_statistics  # noqa: F401  (DISCARDED_JUMPS: re-exported)
+from .statistics import empty_rows, jump_statistics
 from .stepping import Stepper
 from .progress import compile_notice
 from .run_directory import CHECKPOINT_NAME
 from .writers import JumpWriter, ParaViewWriter, TrackWriter, run_metadata, write_json, write_table
 
 VARIANCE_FILE = "variance.parquet"  # displacement variances for the diffusion exponents
-
 
 
 class SimulationError(RuntimeError):
@@ -204,7 +203,6 @@ class Simulation:
         start = initial_conditions if c.collisions.model == "off" else initial_conditions_apart
         pos, vel, spin = start(self.n, self.domain_d, c.run.seed, c.run.release_height)
         return make_state(pos, vel, spin, 0.0, self.n_window)
-
 
     def _fail(self, st, step_base, steps_done):
         p = int(np.nonzero(st.status == NOT_FINITE)[0][0])

@@ -18,9 +18,8 @@ _P, _J, _L, _H, _U, _T = range(6)
 
 
 def counted_jumps(rows: np.ndarray) -> np.ndarray:
-    """The rows the statistics use, ordered by (particle, jump): the result does not
-    depend on when jumps were collected."""
-    rows = np.asarray(rows, dtype=np.float64).reshape(-1, len(ROW_COLUMNS))
+    """The rows (an (n, 6) array of ROW_COLUMNS) the statistics use, ordered by (particle,
+    jump): the result does not depend on when jumps were collected."""
     counted = rows[rows[:, _J] >= DISCARDED_JUMPS]
     return counted[np.lexsort((counted[:, _J], counted[:, _P]))]
 
