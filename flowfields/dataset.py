@@ -25,6 +25,10 @@ from .sampler import ABOVE_TOP, BELOW_WALL, FlowArrays, sample_many, sample_velo
 
 FORMAT_VERSION = 1
 SHIPPED_DATASET = Path(__file__).resolve().parent / "data" / "channel395"
+# Shipped datasets by name: the smooth-wall channel (the paper's set-up) and the sand bed
+# inside the LES (SPEC §3 rough bed; made by 'saltation flow generate --bed porous').
+SHIPPED_DATASETS = {"channel395": SHIPPED_DATASET,
+                    "sandbed395": SHIPPED_DATASET.parent / "sandbed395"}
 _REQUIRED_META = ("format_version", "re_tau", "times_plus", "storage", "provenance")
 _META_DOC = {
     "format_version": f"the integer {FORMAT_VERSION}",
@@ -86,6 +90,17 @@ class FlowDataset:
         return (self.dx * len(self.x), float(self.y[-1]), self.dz * len(self.z))
 
     @property
+    def bed(self) -> dict | None:
+        """The rough bed's description (meta.json "bed"), or None for a smooth wall."""
+        return self.meta.get("bed")
+
+    @property
+    def y_floor(self) -> float:
+        """y⁺ below which the fluid is at rest: the wall (0), or the bottom of a rough
+        bed's porous layer (negative: y⁺ = 0 is the bed top)."""
+        return float(self.bed["floor_plus"]) if self.bed else 0.0
+
+    @property
     def arrays(self) -> FlowArrays:
         """The tuple the Numba kernels take."""
         t = self.times
@@ -104,6 +119,8 @@ class FlowDataset:
             float(t[0]),
             dt,
             int(self.data.shape[0]),
+            self.y_floor,
+            0.0 if self.bed else 1.0,
         )
 
     # ------------------------------------------------------------------ sampling
@@ -122,7 +139,7 @@ class FlowDataset:
             i = int(bad[0])
             raise ValueError(
                 f"point {i} at y⁺ = {p[i, 1]:.6g} is outside the dataset's wall-normal range "
-                f"[0, {self.y[-1]:.6g}] ({len(bad)} point(s) outside)"
+                f"[{self.y_floor:g}, {self.y[-1]:.6g}] ({len(bad)} point(s) outside)"
             )
 
     def velocity(self, points, t: float) -> np.ndarray:
@@ -183,6 +200,7 @@ class FlowDataset:
             "time_span_plus": float(t[-1] - t[0]) if len(t) else 0.0,
             "snapshot_interval_plus": self.snapshot_interval if len(t) > 1 else None,
             "storage": self.meta["storage"],
+            "bed": self.bed,
             "provenance": self.meta["provenance"],
         }
 
@@ -207,7 +225,8 @@ def write_dataset(path, x, y, z, u_plus, re_tau, times_plus, provenance, dtype="
     path = Path(path)
     x, y, z = (np.asarray(a, dtype=np.float64) for a in (x, y, z))
     times_plus = np.asarray(times_plus, dtype=np.float64)
-    _validate_grid(x, y, z, times_plus, u_plus.shape, where=str(path))
+    floor = float(extra_meta["bed"]["floor_plus"]) if extra_meta and "bed" in extra_meta else 0.0
+    _validate_grid(x, y, z, times_plus, u_plus.shape, where=str(path), floor=floor)
     if not np.all(np.isfinite(u_plus)):
         raise DatasetError(f"{path}: velocity contains NaN or infinite values")
     path.mkdir(parents=True, exist_ok=True)
@@ -245,7 +264,7 @@ def write_dataset(path, x, y, z, u_plus, re_tau, times_plus, provenance, dtype="
     return path
 
 
-def _validate_grid(x, y, z, times, shape, where):
+def _validate_grid(x, y, z, times, shape, where, floor=0.0):
     for name, a in (("x", x), ("y", y), ("z", z)):
         if np.ndim(a) != 1:
             raise DatasetError(f"{where}: {name} cell centres must be a 1-D array, got shape {np.shape(a)}")
@@ -264,7 +283,9 @@ def _validate_grid(x, y, z, times, shape, where):
             d = np.diff(a)
             if np.any(d <= 0) or np.ptp(d) > 1e-6 * abs(d.mean()) + 1e-9:
                 raise DatasetError(f"{where}: {name} cell centres are not uniform and increasing")
-    if len(y) == 0 or y[0] <= 0 or np.any(np.diff(y) <= 0):
+    if len(y) == 0 or y[0] <= floor or np.any(np.diff(y) <= 0):
+        if floor < 0:
+            raise DatasetError(f"{where}: y⁺ cell centres must be increasing and above the bed floor y⁺ = {floor:g}")
         raise DatasetError(f"{where}: y⁺ cell centres must be positive and increasing (wall at y⁺ = 0)")
     if len(times) > 1:
         d = np.diff(times)
@@ -323,6 +344,17 @@ def _validate_meta(meta, meta_file: Path) -> None:
         g = meta["grid"]
         if not isinstance(g, list) or len(g) != 3 or not all(isinstance(x, int) and not isinstance(x, bool) and x > 0 for x in g):
             raise bad("grid", g, "a list of three positive integers [nx, ny, nz]")
+    if "bed" in meta:
+        b = meta["bed"]
+        if not isinstance(b, dict):
+            raise bad("bed", b, "an object describing the rough bed (d_plus, floor_plus, ...)")
+        v = b.get("d_plus")
+        if not _is_number(v) or not np.isfinite(v) or v <= 0:
+            raise bad("bed.d_plus", v, "the bed grain's diameter in wall units, a positive finite number")
+        v = b.get("floor_plus")
+        if not _is_number(v) or not np.isfinite(v) or v > 0:
+            raise bad("bed.floor_plus", v, "the bottom of the stored bed layer in wall units below the bed top "
+                      "(a number ≤ 0)")
     if "kind" in meta and not isinstance(meta["kind"], str):
         raise bad("kind", meta["kind"], 'a string (e.g. "les")')
 
@@ -331,7 +363,12 @@ def open_dataset(path=None) -> FlowDataset:
     """Open a flow dataset folder (None: the shipped default LES dataset).
 
     Arrays are memory-mapped read-only; nothing is copied."""
-    p = SHIPPED_DATASET if path is None else Path(path)
+    if path is None:
+        p = SHIPPED_DATASET
+    elif isinstance(path, str) and path in SHIPPED_DATASETS and not Path(path).exists():
+        p = SHIPPED_DATASETS[path]
+    else:
+        p = Path(path)
     if not p.exists():
         hint = " (the shipped dataset is missing from this installation)" if path is None else ""
         raise DatasetError(f"flow dataset not found: {p}{hint}")
@@ -360,7 +397,7 @@ def open_dataset(path=None) -> FlowDataset:
     if arrays["u"].dtype != want:
         raise DatasetError(f"{p / 'u.npy'}: dtype {arrays['u'].dtype} but meta.json says {want}")
     _validate_grid(arrays["x"], arrays["y"], arrays["z"], np.asarray(meta["times_plus"], dtype=float),
-                   arrays["u"].shape, str(p))
+                   arrays["u"].shape, str(p), floor=float(meta["bed"]["floor_plus"]) if "bed" in meta else 0.0)
     if "grid" in meta and list(meta["grid"]) != [len(arrays["x"]), len(arrays["y"]), len(arrays["z"])]:
         raise DatasetError(f"{meta_file}: grid = {meta['grid']} but the arrays hold "
                            f"{[len(arrays['x']), len(arrays['y']), len(arrays['z'])]} cell centres (x, y, z)")
@@ -384,7 +421,8 @@ def in_memory_dataset(x, y, z, u_plus, re_tau, times_plus, meta_extra=None) -> F
     x, y, z = (np.asarray(a, dtype=np.float64) for a in (x, y, z))
     times_plus = np.asarray(times_plus, dtype=np.float64)
     u_plus = np.ascontiguousarray(u_plus, dtype=np.float32)
-    _validate_grid(x, y, z, times_plus, u_plus.shape, "in-memory dataset")
+    floor = float(meta_extra["bed"]["floor_plus"]) if meta_extra and "bed" in meta_extra else 0.0
+    _validate_grid(x, y, z, times_plus, u_plus.shape, "in-memory dataset", floor=floor)
     lx = float((x[1] - x[0]) * len(x))
     lz = float((z[1] - z[0]) * len(z))
     meta = {

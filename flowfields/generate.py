@@ -32,8 +32,14 @@ from pathlib import Path
 import numpy as np
 
 from flowfields import openfoam as of
+from flowfields import rough_bed as rb
 
 INITIAL_CONDITIONS = ("map", "perturb")
+BED_KINDS = ("smooth", "porous")
+BED_D_PLUS_RANGE = (5.0, 100.0)
+# The dataset keeps the bed layer down to half a grain below the bed top (the top layer's
+# centre plane): deeper the pore flow is below 1e-3 u* (Ergun drag at ε < 0.1 there).
+STORED_BED_DEPTH_D = 0.5
 
 
 @dataclass(frozen=True)
@@ -58,6 +64,15 @@ class ChannelParams:
     max_courant: float = 0.5           # adaptive time step limit
     convection: str = "linear"         # "linear" or "LUST" for div(phi,U)
     seed: int = 0                      # random noise of the "perturb" initial condition
+    # Rough bed (SPEC §3, flowfields.rough_bed): "smooth" walls, or "porous": a layer of
+    # packed grains of d⁺ = bed_d_plus, bed_depth_d grains deep, below each bed top, with
+    # Ergun drag per cell layer; driven by a fixed gradient u*²/h (h = depth above the bed
+    # top), so that u* and the grain's d⁺ are what was asked for.
+    bed: str = "smooth"
+    bed_d_plus: float = 19.5           # bed grain diameter in wall units (Re* of the grains)
+    bed_depth_d: float = 1.0           # porous layer thickness below the bed top, in d
+    bed_porosity: float = 0.2595       # bulk porosity of the packing (close-packed spheres)
+    ny_bed: int = 12                   # uniform cells across the porous layer
 
     def __post_init__(self):
         def positive(name):
@@ -74,6 +89,21 @@ class ChannelParams:
                 raise ValueError(f"{name} must be an integer >= {minimum}, got {value!r}")
         if self.ny % 2:
             raise ValueError(f"ny must be even (two blocks graded towards the two walls), got {self.ny}")
+        if self.bed not in BED_KINDS:
+            raise ValueError(f"bed must be one of {BED_KINDS}, got {self.bed!r}")
+        if self.bed == "porous":
+            if not (isinstance(self.bed_d_plus, (int, float)) and math.isfinite(self.bed_d_plus)
+                    and BED_D_PLUS_RANGE[0] <= self.bed_d_plus <= BED_D_PLUS_RANGE[1]):
+                raise ValueError(f"bed_d_plus (the bed grain's d+, roughness) must lie in {BED_D_PLUS_RANGE} "
+                                 f"(hydraulically smooth below, beyond the mesh's reach above), got {self.bed_d_plus!r}")
+            if not (isinstance(self.bed_depth_d, (int, float)) and 0.5 <= self.bed_depth_d <= 5.0):
+                raise ValueError(f"bed_depth_d must lie between 0.5 and 5 grain diameters, got {self.bed_depth_d!r}")
+            rb.check_porosity(self.bed_porosity)
+            if isinstance(self.ny_bed, bool) or not isinstance(self.ny_bed, int) or self.ny_bed < 4:
+                raise ValueError(f"ny_bed must be an integer >= 4, got {self.ny_bed!r}")
+            if self.bed_d_plus * self.bed_depth_d / self.ny_bed > 4.0:
+                raise ValueError(f"bed cells of {self.bed_d_plus * self.bed_depth_d / self.ny_bed:.2f} wall units "
+                                 "cannot resolve the grains' porosity profile: raise ny_bed (cells ≤ 4 wall units)")
         if self.initial not in INITIAL_CONDITIONS:
             raise ValueError(f"initial must be one of {INITIAL_CONDITIONS}, got {self.initial!r}")
         if self.convection not in ("linear", "LUST"):
@@ -100,6 +130,39 @@ class ChannelParams:
     def ubar(self) -> float:
         """Bulk velocity held by meanVelocityForce (m/s)."""
         return self.ubar_plus * self.u_tau
+
+    # -- rough bed (bed = "porous") --
+    @property
+    def grain_diameter(self) -> float:
+        """Bed grain diameter d (m) = d⁺ ν/u_τ."""
+        return self.bed_d_plus * self.nu / self.u_tau
+
+    @property
+    def bed_thickness(self) -> float:
+        """Porous layer thickness b (m) below each bed top."""
+        return self.bed_depth_d * self.grain_diameter if self.bed == "porous" else 0.0
+
+    @property
+    def driving_gradient(self) -> float:
+        """Nominal driving gradient G = u_τ²/h (m/s²): the momentum balance of the fluid
+        above the bed top, in equilibrium."""
+        return self.u_tau**2 / self.h
+
+    @property
+    def rough_ubar(self) -> float:
+        """Bulk velocity of the whole rough box (bed layers at rest included), m/s."""
+        return self.rough_ubar_estimate_plus * self.u_tau * self.h / (self.h + self.bed_thickness)
+
+    def bed_layers(self) -> list[dict]:
+        """Porous zones (one per bed cell layer, in d below the bed top)."""
+        faces = np.linspace(-self.bed_depth_d, 0.0, self.ny_bed + 1)
+        return rb.bed_layers(faces, self.grain_diameter, self.bed_porosity)
+
+    @property
+    def rough_ubar_estimate_plus(self) -> float:
+        """Bulk u⁺ above the bed top expected before the run: the smooth value less
+        Colebrook's ΔU⁺ at k_s = d (only scales the initial field)."""
+        return self.ubar_plus - float(rb.colebrook_delta_u(self.bed_d_plus))
 
     @property
     def viscous_time(self) -> float:
@@ -146,7 +209,7 @@ class ChannelParams:
             "dy_plus_centre": float(dy[self.ny // 2 - 1]),
             "first_cell_yplus": float(0.5 * dy[0]),
             "cell_growth_ratio": float(self.expansion ** (1.0 / max(1, self.ny // 2 - 1))),
-            "n_cells": self.nx * self.ny * self.nz,
+            "n_cells": self.nx * (self.ny + (2 * self.ny_bed if self.bed == "porous" else 0)) * self.nz,
         }
 
     def as_dict(self) -> dict:
@@ -188,6 +251,16 @@ def write_case(p: ChannelParams, case: Path, commands: list) -> dict:
                           write_interval=p.spinup_time, delta_t=_initial_delta_t(p),
                           max_courant=p.max_courant, max_delta_t=_max_delta_t(p),
                           convection=p.convection, nprocs=p.nprocs)
+    if p.bed == "porous":
+        # the bed layers below both bed tops, their porous zones and the fixed gradient
+        of.write_rough_block_mesh_dict(case, lx=p.lx, lz=p.lz, h=p.h, b=p.bed_thickness, nx=p.nx,
+                                       ny=p.ny, ny_bed=p.ny_bed, nz=p.nz, expansion=p.expansion)
+        of.write_bed_topo_set(case, p.bed_layers(), lx=p.lx, lz=p.lz, h=p.h, b=p.bed_thickness,
+                              d=p.grain_diameter)
+        of.write_rough_fv_options(case, p.rough_ubar, p.bed_layers())
+        of.write_control_dict(case, end_time=p.spinup_time, write_interval=p.spinup_time,
+                              delta_t=_initial_delta_t(p), max_courant=p.max_courant,
+                              max_delta_t=_max_delta_t(p), monitor_bulk=True)
     if p.initial == "map":
         source = of.prepare_tutorial_source(case / "channel395_source", commands)
         U = of.map_tutorial_velocity(case, source, lx=p.lx, lz=p.lz, h=p.h, nx=p.nx, ny=p.ny,
@@ -206,9 +279,18 @@ def write_case(p: ChannelParams, case: Path, commands: list) -> dict:
         ic = {"initial": "perturb", "seed": p.seed,
               "method": "Reichardt mean profile scaled to Ubar + streaks (spacing 100 nu/u_tau, "
                         "peak y+=15, amplitude 3 u_tau) + meandering w + 5% Ubar noise"}
+    if p.bed == "porous":
+        # the smooth field above the bed tops, slowed to the expected rough bulk velocity;
+        # the bed blocks (numbered after the fluid blocks) start at rest
+        U = np.vstack([U * (p.rough_ubar_estimate_plus / p.ubar_plus),
+                       np.zeros((2 * p.nx * p.ny_bed * p.nz, 3))])
+        ic["bed"] = (f"fluid velocity scaled by {p.rough_ubar_estimate_plus / p.ubar_plus:.4f} "
+                     "(Colebrook's ΔU+ at k_s = d off the smooth bulk u+); bed at rest")
     of.write_velocity_field(case, U)
     of.write_scalar_fields(case)
     of.run_block_mesh(case, commands)
+    if p.bed == "porous":
+        of.run_tool(["topoSet"], case, "topoSet", commands=commands)
     return ic
 
 
@@ -229,6 +311,10 @@ def _progress_printer(stage: str, p: ChannelParams, t_begin: float, t_end: float
         if grads is not None:
             u_tau = math.sqrt(max(grads, 0.0) * p.h)  # dp/dx = u_τ²/h in equilibrium
             msg += f", Re_tau(dp/dx, last steps) = {u_tau * p.h / p.nu:5.1f}"
+        if p.bed == "porous":
+            bulk = of.bulk_velocity_history(log.parent)
+            if len(bulk):
+                msg += f", bulk U+ (whole box) = {bulk[-1, 1] / p.u_tau:6.3f}"
         _say(msg)
 
     def re_grads(log: Path):
@@ -264,6 +350,49 @@ def spinup_check(log: Path, p: ChannelParams) -> dict:
     return out
 
 
+ROUGH_SPINUP_PHASES = 3
+
+
+def _spin_up_to_target(p: ChannelParams, case: Path, commands: list) -> list[dict]:
+    """Rough bed: the flow rate that gives the requested u* over the bed is not known
+    before the run (it depends on the bed's ΔU⁺). The spin-up runs in ROUGH_SPINUP_PHASES
+    equal phases; after each but the last, u* is measured from the mean driving gradient
+    over the phase's second half (momentum balance at the bed top) and the flow rate is
+    scaled by Re_τ,target/Re_τ,measured, so the grain's d⁺ comes out as asked. The last
+    phase is run by the caller. Returns the corrections made."""
+    corrections = []
+    ubar = p.rough_ubar
+    t_prev = 0.0
+    for k in range(1, ROUGH_SPINUP_PHASES):
+        t_end = round_significant(k * p.spinup_time / ROUGH_SPINUP_PHASES)
+        of.write_control_dict(case, end_time=t_end, write_interval=t_end - t_prev, delta_t=_initial_delta_t(p),
+                              max_courant=p.max_courant, max_delta_t=_max_delta_t(p), monitor_bulk=True)
+        log = of.run_pimple_foam(case, nprocs=p.nprocs, log_name=f"pimpleFoam.spinup{k}", commands=commands,
+                                 progress=_progress_printer(f"spin-up ({k}/{ROUGH_SPINUP_PHASES})", p, 0.0,
+                                                            p.spinup_time))
+        hist = of.pressure_gradient_history(log)
+        late = hist[hist[:, 0] >= 0.5 * (t_prev + t_end), 1] if len(hist) else hist
+        g_late = float(np.mean(late)) if len(late) else float("nan")
+        if not math.isfinite(g_late):
+            raise of.OpenFOAMError(f"no driving-gradient lines in {log}: the flow did not run")
+        # a gradient ≤ 0 holds back a flow far too fast for its bed: halve the flow rate
+        re_meas = math.sqrt(max(g_late, 0.0) * p.h) * p.h / p.nu
+        # at most a factor 2 per phase (a flow far from its equilibrium is corrected over
+        # several phases; what it reaches is measured and recorded in the end)
+        factor = min(2.0, max(0.5, p.re_tau / re_meas)) if re_meas > 0 else 0.5
+        ubar *= factor
+        of.write_rough_fv_options(case, ubar, p.bed_layers())
+        corrections.append({"phase": k, "t_end_s": t_end, "re_tau_measured": round(re_meas, 2),
+                            "factor": round(factor, 5), "ubar_m_s": ubar})
+        _say(f"spin-up phase {k}: Re_tau = {re_meas:.1f} from the driving gradient; flow rate scaled by {factor:.4f}")
+        t_prev = t_end
+    # the caller's last phase: one write, at the spin-up end (write times count from the run's start)
+    of.write_control_dict(case, end_time=p.spinup_time, write_interval=p.spinup_time - t_prev,
+                          delta_t=_initial_delta_t(p), max_courant=p.max_courant,
+                          max_delta_t=_max_delta_t(p), monitor_bulk=True)
+    return corrections
+
+
 def run_channel_les(p: ChannelParams, case: Path | str, command_line: str | None = None,
                     overwrite: bool = False) -> tuple[Path, dict]:
     """Run the whole OpenFOAM chain in the case directory `case`.
@@ -295,6 +424,9 @@ def run_channel_les(p: ChannelParams, case: Path | str, command_line: str | None
 
     t0 = time.time()
     _say(f"stage 2: spin-up, {p.spinup_tplus} t+ (t = 0 .. {p.spinup_time:.6g} s)")
+    ubar_correction = None
+    if p.bed == "porous":
+        ubar_correction = _spin_up_to_target(p, case, commands)
     spin_log = of.run_pimple_foam(case, nprocs=p.nprocs, log_name="pimpleFoam.spinup",
                                   commands=commands,
                                   progress=_progress_printer("spin-up", p, 0.0, p.spinup_time))
@@ -304,6 +436,8 @@ def run_channel_les(p: ChannelParams, case: Path | str, command_line: str | None
         raise of.OpenFOAMError(f"pimpleFoam wrote no time directory at the spin-up end "
                                f"t = {p.spinup_time:.12g} in {case}; see {spin_log}")
     settle = spinup_check(spin_log, p)
+    if p.bed == "porous":
+        settle["ubar_correction"] = ubar_correction
     _say(f"spin-up done in {walls['spinup']:.0f} s; wall-shear check {settle}")
 
     t0 = time.time()
@@ -311,7 +445,7 @@ def run_channel_les(p: ChannelParams, case: Path | str, command_line: str | None
          f"({p.snapshot_interval:.6g} s)")
     of.write_control_dict(case, end_time=p.end_time, write_interval=p.snapshot_interval,
                           delta_t=_initial_delta_t(p), max_courant=p.max_courant,
-                          max_delta_t=_max_delta_t(p))
+                          max_delta_t=_max_delta_t(p), monitor_bulk=p.bed == "porous")
     of.run_pimple_foam(case, nprocs=p.nprocs, log_name="pimpleFoam.sampling", commands=commands,
                        progress=_progress_printer("sampling", p, p.spinup_time, p.end_time))
     walls["sampling"] = round(time.time() - t0, 1)
@@ -356,6 +490,8 @@ def run_channel_les(p: ChannelParams, case: Path | str, command_line: str | None
         },
         "initial_condition": ic,
         "spinup_check": settle,
+        "sampling_check": spinup_check(case / "log.pimpleFoam.sampling", p),
+        "bed": bed_description(p, case / "log.pimpleFoam.sampling"),
         "snapshot_times_s": times,
         "case_dir": str(case),
         "vtk_series": str(series),
@@ -364,6 +500,38 @@ def run_channel_les(p: ChannelParams, case: Path | str, command_line: str | None
     }
     (case / "provenance.json").write_text(json.dumps(provenance, indent=2))
     return series, provenance
+
+
+def measured_u_tau(log: Path, p: ChannelParams) -> float:
+    """u* from the momentum balance of the fluid above the bed top, u*² = ⟨G⟩ h, with ⟨G⟩
+    the driving gradient averaged over the sampling run (m/s)."""
+    hist = of.pressure_gradient_history(log)
+    if not len(hist):
+        raise of.OpenFOAMError(f"{log}: no driving-gradient lines ('pressure gradient = '); cannot measure u*")
+    g = float(np.mean(hist[:, 1]))
+    if not g > 0:
+        raise of.OpenFOAMError(f"{log}: mean driving gradient {g} is not positive")
+    return math.sqrt(g * p.h)
+
+
+def bed_description(p: ChannelParams, sampling_log: Path | None = None) -> dict | None:
+    """What the dataset records about its bed (SPEC §3 rough bed)."""
+    if p.bed == "smooth":
+        return None
+    u_tau = measured_u_tau(sampling_log, p) if sampling_log is not None else p.u_tau
+    return {
+        "u_tau_m_s": u_tau, "d_plus_measured": p.grain_diameter * u_tau / p.nu,
+        "re_tau_measured": u_tau * p.h / p.nu,
+        "kind": "porous layer of hexagonally close-packed grains, Ergun (1952) Darcy-Forchheimer drag "
+                "per cell layer at the layer's mean solid fraction",
+        "d_plus": p.bed_d_plus, "depth_d": p.bed_depth_d, "porosity": p.bed_porosity,
+        "grain_diameter_m": p.grain_diameter, "thickness_m": p.bed_thickness,
+        "bed_top_y_m": [p.bed_thickness, p.bed_thickness + 2.0 * p.h],
+        "depth_above_bed_top_m": p.h,
+        "u_tau_source": "momentum balance at the bed top: u*^2 = <G> h (G the driving gradient that holds the "
+                        "flow rate, averaged over the sampling run; h the depth from the bed top to the centre line)",
+        "layers": p.bed_layers(),
+    }
 
 
 def _prepare_case_dir(case: Path, overwrite: bool) -> None:
@@ -404,10 +572,49 @@ def generate(params: ChannelParams, out_dataset, work_dir, command_line: str | N
 
     t0 = time.time()
     _say(f"stage 5: importing {series} into {out_dataset}")
+    rough = {}
+    if params.bed == "porous":
+        # y = 0 at the bottom bed top; u* from the momentum balance there, not the wall
+        bed = provenance["bed"]
+        rough = {"y_origin": params.bed_thickness, "u_tau": bed["u_tau_m_s"],
+                 "y_min": params.bed_thickness - STORED_BED_DEPTH_D * params.grain_diameter,
+                 "bed_d_plus": bed["d_plus_measured"]}
     result = import_series(series, out_dataset, nu=params.nu, provenance=provenance,
-                           y_max_plus=y_max_plus, dtype=dtype)
+                           y_max_plus=y_max_plus, dtype=dtype, **rough)
     _say(f"import done in {time.time() - t0:.0f} s")
-    return Path(result) if result is not None else Path(out_dataset)
+    path = Path(result) if result is not None else Path(out_dataset)
+    if params.bed == "porous":
+        fit = record_roughness(path)
+        if "error" in fit:
+            _say(f"rough bed: no roughness fit ({fit['error']})")
+        else:
+            _say(f"rough bed: dU+ = {fit['delta_u_plus']:.2f}, virtual origin {fit['virtual_origin_d']:.3f} d, "
+                 f"k_s = {fit['ks_d_colebrook']:.2f} d (Colebrook)")
+    return path
+
+
+def record_roughness(dataset_path) -> dict:
+    """Measure the rough bed's ΔU⁺, virtual origin and k_s from the dataset's own mean
+    profile (rough_bed.roughness_fit) and record them in its meta.json "bed"."""
+    from flowfields.check import profile_statistics
+    from flowfields.dataset import open_dataset
+
+    ds = open_dataset(dataset_path)
+    prof = profile_statistics(ds)
+    meta_file = Path(dataset_path) / "meta.json"
+    meta = json.loads(meta_file.read_text())
+    try:
+        fit = rb.roughness_fit(prof["y_plus"].to_numpy(), prof["u_plus"].to_numpy(), float(ds.bed["d_plus"]),
+                               re_tau=ds.re_tau)
+    except ValueError as exc:  # a channel too shallow for a log region
+        meta["bed"]["roughness_fit_error"] = str(exc)
+        meta_file.write_text(json.dumps(meta, indent=1))
+        return {"error": str(exc)}
+    meta["bed"].update({k: fit[k] for k in ("delta_u_plus", "virtual_origin_plus", "virtual_origin_d",
+                                            "ks_plus_colebrook", "ks_d_colebrook", "ks_plus_nikuradse",
+                                            "ks_d_nikuradse", "log_range_plus", "log_fit_max_rel_dev")})
+    meta_file.write_text(json.dumps(meta, indent=1))
+    return fit
 
 
 # --------------------------------------------------------------------------------------

@@ -192,13 +192,22 @@ def detect_tensor_grid(pos: np.ndarray, where: str):
 
 # ---------------------------------------------------------------------- import
 def import_series(src, out, *, nu, provenance=None, y_max_plus=None, dtype="float32", u_tau=None, progress=True,
-                  max_snapshots=None):
+                  max_snapshots=None, y_origin=None, y_min=None, bed_d_plus=None):
     """Import an LES snapshot series into a dataset folder ``out`` (wall units).
 
     nu: kinematic viscosity (m²/s, or the LES's own unit). y_max_plus: keep the lower
     part of the channel up to this y⁺ (default: the lower half, y ≤ h). dtype: "float32"
     or "int16" (quantized, for shipping). u_tau: override the measured friction velocity.
+    Rough bed (the LES carries a porous grain layer, flowfields.rough_bed): y_origin is
+    the bed top (LES length units), which becomes y⁺ = 0; cells from y_min (default: the
+    bottom wall) up are kept, those inside the bed with negative y⁺; u_tau must be given
+    (from the momentum balance at the bed top: the wall shear under the bed is not u*);
+    bed_d_plus is the bed grain's diameter in wall units. Re_τ is then u_τ times the depth
+    from the bed top to the centre line over ν.
     Returns the dataset path."""
+    if y_origin is not None and (u_tau is None or bed_d_plus is None):
+        raise ValueError("a rough-bed import (y_origin given) needs u_tau (momentum balance at the bed top) "
+                         "and bed_d_plus")
     from tqdm import tqdm
 
     if nu is None or not nu > 0:
@@ -229,6 +238,8 @@ def import_series(src, out, *, nu, provenance=None, y_max_plus=None, dtype="floa
             eps = 1e-9 * (walls[1] - walls[0])
             jb = 1 if axes[1][0] - walls[0] <= eps else 0
             jt = len(axes[1]) - 2 if walls[1] - axes[1][-1] <= eps else len(axes[1]) - 1
+            if y_min is not None:
+                jb = max(jb, int(np.searchsorted(axes[1], y_min)))
         else:
             axes, flat, pos0 = grid
             if pos.shape != pos0.shape or np.max(np.abs(pos - pos0)) > 1e-5 * np.ptp(pos0):
@@ -257,12 +268,13 @@ def import_series(src, out, *, nu, provenance=None, y_max_plus=None, dtype="floa
         raise SnapshotError(f"{src}: no snapshots")
     axes, _, _ = grid
     mean_shear = float(np.mean(wall_shear))
-    if not mean_shear > 0:
+    if u_tau is None and not mean_shear > 0:
         raise SnapshotError(f"{src}: mean wall shear is not positive: the mean flow must be along +x")
     ut = float(u_tau) if u_tau is not None else float(np.sqrt(nu * mean_shear))
-    h = 0.5 * (walls[1] - walls[0])
+    origin = walls[0] if y_origin is None else float(y_origin)
+    h = 0.5 * (walls[1] + walls[0]) - origin  # depth from the wall (bed top) to the centre line
     re_tau = ut * h / nu
-    yplus = (axes[1] - walls[0]) * ut / nu
+    yplus = (axes[1] - origin) * ut / nu
     top = re_tau if y_max_plus is None else float(y_max_plus)
     jmax = int(np.searchsorted(yplus, top)) + 1  # keep one centre at or above the top
     jmax = min(jmax, jt + 1)
@@ -282,8 +294,14 @@ def import_series(src, out, *, nu, provenance=None, y_max_plus=None, dtype="floa
             "u_tau_measured": u_tau is None,
         }
     )
+    extra = None
+    if y_origin is not None:
+        extra = {"bed": {"kind": "porous", "d_plus": float(bed_d_plus),
+                         "floor_plus": float((walls[0] - origin) * ut / nu),
+                         "y_origin": "bed top (the grains' y = 0)"}}
     return write_dataset(
         out,
+        extra_meta=extra,
         x=(axes[0] - axes[0][0] + 0.5 * (axes[0][1] - axes[0][0] if len(axes[0]) > 1 else 0)) * ut / nu,
         y=yplus[jb:jmax],
         z=(axes[2] - axes[2][0] + 0.5 * (axes[2][1] - axes[2][0] if len(axes[2]) > 1 else 0)) * ut / nu,

@@ -294,7 +294,8 @@ def patch_names(tutorial_patch_names: bool = False) -> list[str]:
 
 def write_control_dict(case: Path, *, end_time: float, write_interval: float,
                        delta_t: float, max_courant: float, max_delta_t: float,
-                       write_format: str = "binary", start_from: str = "latestTime") -> Path:
+                       write_format: str = "binary", start_from: str = "latestTime",
+                       monitor_bulk: bool = False) -> Path:
     """pimpleFoam controlDict. The time step adapts to `max_courant`; with
     `adjustableRunTime` OpenFOAM shortens the step to land exactly on every write time,
     so snapshots are equally spaced at `write_interval` after the run's start time."""
@@ -318,7 +319,30 @@ adjustTimeStep  yes;
 maxCo           {_fmt(max_courant)};
 maxDeltaT       {_fmt(max_delta_t)};
 """
+    if monitor_bulk:
+        text += BULK_MONITOR
     return _write(case / "system" / "controlDict", text)
+
+
+# Volume-averaged velocity every 20 steps (postProcessing/bulk/<t0>/volFieldValue.dat):
+# with a fixed driving gradient the bulk velocity is the quantity that settles.
+BULK_MONITOR = """
+functions
+{
+    bulk
+    {
+        type            volFieldValue;
+        libs            ("libfieldFunctionObjects.so");
+        writeControl    timeStep;
+        writeInterval   20;
+        log             false;
+        writeFields     false;
+        regionType      all;
+        operation       volAverage;
+        fields          (U);
+    }
+}
+"""
 
 
 def write_fv_schemes(case: Path, convection: str = "linear") -> Path:
@@ -659,6 +683,18 @@ def run_tool(args: Sequence[str], case: Path, log_name: str, *, commands: list |
             except subprocess.TimeoutExpired:
                 if progress is not None:
                     progress(log)
+                bad = diverged_line(log)
+                if bad is not None:
+                    proc.terminate()
+                    try:
+                        proc.wait(timeout=30)
+                    except subprocess.TimeoutExpired:
+                        proc.kill()
+                    if commands is not None:
+                        commands[-1]["wall_s"] = round(time.time() - t0, 2)
+                        commands[-1]["returncode"] = "stopped: diverged"
+                    raise OpenFOAMError(f"{tool} diverged in {case}, stopped; log {log} line {bad[0]}: "
+                                        f"{bad[1].strip()!r} (try a smaller --max-courant, or convection LUST)")
     if commands is not None:
         commands[-1]["wall_s"] = round(time.time() - t0, 2)
         commands[-1]["returncode"] = rc
@@ -667,6 +703,27 @@ def run_tool(args: Sequence[str], case: Path, log_name: str, *, commands: list |
         raise OpenFOAMError(f"{tool} failed (exit code {rc}) in {case}; see log {log}\n"
                             + _fatal_excerpt(text_tail))
     return log
+
+
+DIVERGED_COURANT = 20.0  # far above maxCo: the time-step control has lost the flow
+
+
+def diverged_line(log: Path) -> tuple[int, str] | None:
+    """(line number, line) of the first sign of a diverged solution in a solver log: a
+    NaN or infinite residual/Courant number, or a Courant number above DIVERGED_COURANT."""
+    try:
+        with open(log, errors="replace") as fh:
+            for n, line in enumerate(fh, 1):
+                low = line.lower()
+                if ("residual" in low or "courant" in low) and re.search(r"\b(nan|-?inf)\b", low):
+                    return n, line
+                if line.startswith("Courant Number"):
+                    m = re.search(r"max: ([-+0-9.eE]+)", line)
+                    if m and float(m.group(1)) > DIVERGED_COURANT:
+                        return n, line
+    except OSError:
+        return None
+    return None
 
 
 def _tail(path: Path, n_bytes: int) -> str:
@@ -854,3 +911,142 @@ def time_directories(case: Path) -> list[tuple[float, str]]:
             except ValueError:
                 pass
     return sorted(out)
+
+
+# --------------------------------------------------------------------------------------
+# Rough bed: a porous layer of packed grains below each wall's bed top (flowfields.rough_bed)
+# --------------------------------------------------------------------------------------
+
+
+def rough_wall_normal_levels(h: float, b: float) -> tuple[float, float, float, float, float]:
+    """y of the bottom wall, bottom bed top, centre line, top bed top, top wall."""
+    return (0.0, b, b + h, b + 2.0 * h, 2.0 * b + 2.0 * h)
+
+
+def write_rough_block_mesh_dict(case: Path, *, lx: float, lz: float, h: float, b: float, nx: int,
+                                ny: int, ny_bed: int, nz: int, expansion: float) -> Path:
+    """Four hex blocks: the two half channels above the bed tops (graded towards the bed
+    tops exactly as the smooth channel's blocks are graded towards its walls), then the
+    bottom and top bed layers (uniform, ny_bed cells each, thickness b). Block order puts
+    the fluid blocks first, so their cells are numbered as the smooth channel's cells
+    (``map_tutorial_velocity`` carries over cell by cell)."""
+    if ny % 2:
+        raise ValueError(f"ny must be even (two symmetric blocks), got {ny}")
+    n = ny // 2
+    levels = rough_wall_normal_levels(h, b)
+    verts = [(x, y, z) for z in (0.0, lz) for y in levels for x in (0.0, lx)]
+    v = "\n".join(f"    ({_fmt(a)} {_fmt(c)} {_fmt(e)})" for a, c, e in verts)
+    off = 2 * len(levels)  # vertex offset of the z = lz plane
+
+    def hexa(lev):
+        a = 2 * lev
+        return f"hex ({a} {a + 1} {a + 3} {a + 2} {a + off} {a + off + 1} {a + off + 3} {a + off + 2})"
+
+    blocks = (f"    {hexa(1)} ({nx} {n} {nz}) simpleGrading (1 {_fmt(expansion)} 1)\n"
+              f"    {hexa(2)} ({nx} {n} {nz}) simpleGrading (1 {_fmt(1.0 / expansion)} 1)\n"
+              f"    {hexa(0)} ({nx} {ny_bed} {nz}) simpleGrading (1 1 1)\n"
+              f"    {hexa(3)} ({nx} {ny_bed} {nz}) simpleGrading (1 1 1)")
+
+    def face(kind, lev):
+        a = 2 * lev
+        return {"x0": f"({a} {a + off} {a + off + 2} {a + 2})", "x1": f"({a + 1} {a + 3} {a + off + 3} {a + off + 1})",
+                "z0": f"({a} {a + 2} {a + 3} {a + 1})", "z1": f"({a + off} {a + off + 1} {a + off + 3} {a + off + 2})"}[kind]
+
+    def patch(name, ptype, faces, neighbour=None):
+        nb = f"        neighbourPatch  {neighbour};\n" if neighbour else ""
+        return (f"    {name}\n    {{\n        type            {ptype};\n{nb}"
+                f"        faces           ({' '.join(faces)});\n    }}\n")
+
+    top = 2 * (len(levels) - 1)
+    patches = [patch("bottomWall", "wall", [f"(0 1 {off + 1} {off})"]),
+               patch("topWall", "wall", [f"({top} {top + off} {top + off + 1} {top + 1})"])]
+    (xa, xb), (za, zb) = CYCLIC_PAIRS
+    levs = range(len(levels) - 1)
+    patches.append(patch(xa, "cyclic", [face("x0", k) for k in levs], xb))
+    patches.append(patch(xb, "cyclic", [face("x1", k) for k in levs], xa))
+    patches.append(patch(za, "cyclic", [face("z0", k) for k in levs], zb))
+    patches.append(patch(zb, "cyclic", [face("z1", k) for k in levs], za))
+    text = (foam_header("dictionary", "blockMeshDict", "system")
+            + "scale   1;\n\nvertices\n(\n" + v + "\n);\n\n"
+            + "blocks\n(\n" + blocks + "\n);\n\nedges\n(\n);\n\n"
+            + "boundary\n(\n" + "".join(patches) + ");\n\nmergePatchPairs\n(\n);\n")
+    return _write(case / "system" / "blockMeshDict", text)
+
+
+def write_bed_topo_set(case: Path, layers: Sequence[dict], *, lx: float, lz: float, h: float, b: float,
+                       d: float) -> Path:
+    """One cellZone ``bed<k>`` per bed cell layer, holding the cells of that layer in both
+    beds (the top bed mirrors the bottom one). Layer extents in d below the bed top."""
+    y_bot_top, y_top_top = b, b + 2.0 * h
+    pad = 1e-6 * (lx + lz)
+    actions = []
+    for k, lay in enumerate(layers):
+        lo, hi = lay["y0_d"] * d, lay["y1_d"] * d  # ≤ 0, relative to the bed top
+        boxes = (f"({_fmt(-pad)} {_fmt(y_bot_top + lo)} {_fmt(-pad)}) ({_fmt(lx + pad)} {_fmt(y_bot_top + hi)} {_fmt(lz + pad)}) "
+                 f"({_fmt(-pad)} {_fmt(y_top_top - hi)} {_fmt(-pad)}) ({_fmt(lx + pad)} {_fmt(y_top_top - lo)} {_fmt(lz + pad)})")
+        actions.append(f"    {{\n        name    bed{k}Set;\n        type    cellSet;\n        action  new;\n"
+                       f"        source  boxToCell;\n        boxes   ({boxes});\n    }}\n"
+                       f"    {{\n        name    bed{k};\n        type    cellZoneSet;\n        action  new;\n"
+                       f"        source  setToCellZone;\n        set     bed{k}Set;\n    }}\n")
+    text = foam_header("dictionary", "topoSetDict", "system") + "actions\n(\n" + "".join(actions) + ");\n"
+    return _write(case / "system" / "topoSetDict", text)
+
+
+def write_rough_fv_options(case: Path, ubar: float, layers: Sequence[dict]) -> Path:
+    """meanVelocityForce holding the whole box's bulk velocity at `ubar` (its gradient G,
+    printed each step, gives u*² = ⟨G⟩ × depth above the bed top: the momentum balance
+    there, exact on average since the flow rate is fixed) and one Ergun DarcyForchheimer
+    zone per bed cell layer."""
+    parts = [f"""\
+momentumSource
+{{
+    type            meanVelocityForce;
+    selectionMode   all;
+    fields          (U);
+    Ubar            ({_fmt(ubar)} 0 0);
+    relaxation      1;
+}}
+"""]
+    for k, lay in enumerate(layers):
+        dc, fc = lay["darcy_d"], lay["forchheimer_f"]
+        if dc <= 0 and fc <= 0:
+            continue
+        parts.append(f"""
+bedPorosity{k}
+{{
+    type            explicitPorositySource;
+    explicitPorositySourceCoeffs
+    {{
+        selectionMode   cellZone;
+        cellZone        bed{k};
+        type            DarcyForchheimer;
+        d   ({_fmt(dc)} {_fmt(dc)} {_fmt(dc)});
+        f   ({_fmt(fc)} {_fmt(fc)} {_fmt(fc)});
+        coordinateSystem
+        {{
+            origin  (0 0 0);
+            rotation {{ type none; }}
+        }}
+    }}
+}}
+""")
+    text = foam_header("dictionary", "fvOptions", "constant") + "".join(parts)
+    return _write(case / "constant" / "fvOptions", text)
+
+
+def bulk_velocity_history(case: Path) -> np.ndarray:
+    """(time, volume-averaged U_x) rows from the bulk monitor files, in time order."""
+    rows = []
+    for f in sorted((Path(case) / "postProcessing" / "bulk").glob("*/volFieldValue*.dat")):
+        for line in f.read_text().splitlines():
+            if not line.strip() or line.startswith("#"):
+                continue
+            parts = line.replace("(", " ").replace(")", " ").split()
+            try:
+                rows.append((float(parts[0]), float(parts[1])))
+            except (ValueError, IndexError):
+                continue
+    if not rows:
+        return np.zeros((0, 2))
+    a = np.array(sorted(set(rows)))
+    return a

@@ -19,6 +19,16 @@ stretched in y (wall at y = 0). Everything here is in wall units (x⁺, y⁺, z�
 * Below the wall (y < 0) the fluid is at rest (status BELOW_WALL); above the top of the
   stored range the value at the top is returned with status ABOVE_TOP so that callers
   can refuse the point.
+* Rough bed (the LES carries a porous layer of grains, flowfields.rough_bed): y⁺ = 0 is
+  the bed top, and the stored grid runs down into the layer (negative y⁺) to its floor
+  ``y_floor`` (the LES wall under the layer). Between the bed top and the first cell
+  centres above it the velocity is the trilinear interpolant between the cell centres
+  straddling the bed top (the LES's own slip and shear there, no wall law); inside the
+  layer it is the LES's superficial velocity, so a grain dipping below the bed top sees
+  the slow pore flow (for lift, its bottom), not zero; below the lowest centre it falls
+  linearly to zero at the floor (``sublayer_slope`` = 0), and below the floor it is zero.
+  For a smooth wall ``y_floor`` = 0 and ``sublayer_slope`` = 1 give the viscous-sublayer
+  law below (same arithmetic bit for bit).
 
 The grid and data travel as a ``FlowArrays`` named tuple, which Numba passes to
 ``@njit`` functions as a plain tuple of arrays and numbers.
@@ -73,6 +83,8 @@ class FlowArrays(NamedTuple):
     t0: float  # t⁺ of the first snapshot
     dt: float  # snapshot interval in t⁺ (loop period nt*dt); 1.0 when nt == 1
     nt: int
+    y_floor: float  # fluid at rest below: 0 (smooth wall) or the bottom of a rough bed's layer (< 0)
+    sublayer_slope: float  # mean u⁺ slope below y[0]: 1 (viscous sublayer) or 0 (inside a rough bed)
 
 
 @njit(cache=True, inline="always", error_model="numpy")
@@ -118,7 +130,7 @@ def wall_normal(f, yp):
     y1 = f.y[0]
     status = OK
     ys = yp
-    if yp < 0.0:
+    if yp < f.y_floor:
         status = BELOW_WALL
     if ys > f.y[ny - 1]:
         ys = f.y[ny - 1]
@@ -233,20 +245,24 @@ def _store_component(f, c, v000, v100, v010, v110, v001, v101, v011, v111,
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _sublayer_with_gradient(yp, y1, u, g, dudt):
-    # SPEC §3 viscous sublayer between the wall and the first cell centre
-    r = yp / y1
+def _sublayer_with_gradient(f, yp, u, g, dudt):
+    # SPEC §3 viscous sublayer between the wall and the first cell centre (slope s = 1),
+    # or linear to zero at a rough bed's floor (s = 0); heights from the floor
+    s = f.sublayer_slope
+    y1 = f.y[0] - f.y_floor
+    yq = yp - f.y_floor
+    r = yq / y1
     u1x = u[0]
     u1y = u[1]
     u1z = u[2]
-    u[0] = yp + r * (u1x - y1)
+    u[0] = s * yq + r * (u1x - s * y1)
     u[1] = r * u1y
     u[2] = r * u1z
     for c in range(3):
         dudt[c] = r * dudt[c]
         g[c, 0] = r * g[c, 0]
         g[c, 2] = r * g[c, 2]
-    g[0, 1] = 1.0 + (u1x - y1) / y1
+    g[0, 1] = s + (u1x - s * y1) / y1
     g[1, 1] = u1y / y1
     g[2, 1] = u1z / y1
 
@@ -287,9 +303,11 @@ def velocity_in_cell(f, c, wx, wy, wz, yp, sublayer):
     u1 = _trilinear(c[1], c[4], c[7], c[10], c[13], c[16], c[19], c[22], wx, wy, wz) * f.scale[1] + f.offset[1]
     u2 = _trilinear(c[2], c[5], c[8], c[11], c[14], c[17], c[20], c[23], wx, wy, wz) * f.scale[2] + f.offset[2]
     if sublayer:
-        y1 = f.y[0]
-        r = yp / y1
-        u0 = yp + r * (u0 - y1)
+        s = f.sublayer_slope
+        y1 = f.y[0] - f.y_floor
+        yq = yp - f.y_floor
+        r = yq / y1
+        u0 = s * yq + r * (u0 - s * y1)
         u1 = r * u1
         u2 = r * u2
     return u0, u1, u2
@@ -323,7 +341,7 @@ def _gradient_at_height(f, n0, n1, wt, i0, i1, wx, k0, k1, wz, yp, u, g, dudt):
         return status
     _gradient_at(f, n0, n1, wt, i0, i1, wx, j0, j1, wy, dyc, k0, k1, wz, u, g, dudt)
     if sublayer:
-        _sublayer_with_gradient(yp, f.y[0], u, g, dudt)
+        _sublayer_with_gradient(f, yp, u, g, dudt)
     if status == ABOVE_TOP:
         # the top value is held constant above the range: no y-derivative there
         for c in range(3):

@@ -22,6 +22,8 @@ def _out_dir(path, option="--out") -> Path:
 def _flow_info(args) -> int:
     from flowfields import open_dataset
 
+    from .flow import BED_TOLERANCE
+
     ds = open_dataset(args.dataset)
     info = ds.describe()
     if args.json:
@@ -30,7 +32,17 @@ def _flow_info(args) -> int:
     g, b, s = info["grid"], info["box_plus"], info["spacing_plus"]
     print(f"dataset        {info['path']}")
     print(f"kind           {info['kind']}")
-    print(f"Re_tau         {info['re_tau']:.1f}  (from the LES's own wall shear)")
+    bed = info.get("bed")
+    if bed:
+        print(f"Re_tau         {info['re_tau']:.1f}  (u* from the momentum balance at the bed top; depth above it)")
+        print(f"bed            rough: porous grain layer, bed grain d+ = {bed['d_plus']:.2f} (runs need Re* = u* d/nu "
+              f"within {100 * BED_TOLERANCE:.0f} %), stored down to y+ = {bed['floor_plus']:.1f} (bed top y+ = 0)")
+        for key, label in (("delta_u_plus", "dU+"), ("virtual_origin_d", "virtual origin (d)"), ("ks_d_colebrook", "k_s (d)")):
+            if key in bed:
+                print(f"               {label} = {bed[key]:.3f}")
+    else:
+        print(f"Re_tau         {info['re_tau']:.1f}  (from the LES's own wall shear)")
+        print("bed            smooth wall")
     print(f"grid           {g['nx']} x {g['ny']} x {g['nz']}  (x, y, z)")
     print(f"box (wall u.)  Lx+ = {b['Lx']:.1f}, y_top+ = {b['y_top']:.1f}, Lz+ = {b['Lz']:.1f}")
     hb = info["box_h"]
@@ -67,7 +79,25 @@ def _flow_check(args) -> int:
     if "log_region" in summary:
         lo, hi = summary["log_region"]
         print(f"log region y+ {lo:.0f}-{hi:.0f}: max |u+/law - 1| = {100 * summary['log_region_max_abs_rel_diff']:.1f}%")
-    print(f"streamwise r.m.s. peak u'+ = {summary['u_rms_peak']:.2f} at y+ = {summary['u_rms_peak_y_plus']:.1f}")
+    rb = summary.get("rough_bed")
+    if rb and "fit_error" in rb:
+        print(f"rough bed: grain d+ = {rb['d_plus']:.2f}; no roughness fit: {rb['fit_error']}")
+    elif rb:
+        print(f"rough bed: grain d+ = {rb['d_plus']:.2f}; u* from {rb['u_tau_source']}")
+        print(f"fitted log law u+ = 2.44 ln(y+ + y_d+) + 5.5 - dU+ over y+ = {rb['log_range_plus'][0]:.0f}-"
+              f"{rb['log_range_plus'][1]:.0f} (from the bed top):")
+        print(f"  dU+ = {rb['delta_u_plus']:.2f}, virtual origin y_d = {rb['virtual_origin_d']:.3f} d below the bed top, "
+              f"max deviation {100 * rb['log_fit_max_rel_dev']:.1f}%")
+        print(f"  equivalent k_s = {rb['ks_d_colebrook']:.2f} d (Colebrook), {rb['ks_d_nikuradse']:.2f} d (Nikuradse fully rough)")
+        print("  Colebrook dU+ at k_s = 1 / 2 / 2.5 d: " + " / ".join(f"{v:.2f}" for v in rb["colebrook_delta_u_plus"].values())
+              + "   (measured minus these: " + " / ".join(f"{v:+.2f}" for v in rb["delta_u_minus_colebrook_at_ks_d"].values()) + ")")
+        print(f"{'y/d':>6} {'y+':>7} {'u+ (LES)':>9} {'u+ (fit)':>9} {'diff':>7} {'smooth log law':>15}")
+        for r in rb["table"]:
+            print(f"{r['y_d']:6.2f} {r['y_plus']:7.1f} {r['u_plus_les']:9.3f} {r['u_plus_fitted_law']:9.3f} "
+                  f"{100 * r['rel_diff']:6.1f}% {r['u_plus_smooth_log_law']:15.3f}" + ("" if r["in_fit_range"] else "  (outside fit range)"))
+        print(f"u+ at the bed top = {rb['u_at_bed_top']:.3f}")
+    print(f"streamwise r.m.s. peak u'+ = {summary['u_rms_peak']:.2f} at y+ = {summary['u_rms_peak_y_plus']:.1f}"
+          + (f" ({rb['u_rms_peak_y_d']:.2f} d above the bed top)" if rb else ""))
     print(f"wrote {out / 'profile.csv'}, {out / 'law_of_the_wall.csv'}, {out / 'profile_check.json'}, {out / 'profile.png'}")
     return 0
 
@@ -114,6 +144,11 @@ def _flow_generate(args) -> int:
         spinup_tplus=args.spinup,
         nprocs=args.np,
         initial=args.initial,
+        bed=args.bed,
+        bed_d_plus=args.bed_d_plus,
+        bed_depth_d=args.bed_depth,
+        bed_porosity=args.bed_porosity,
+        ny_bed=args.ny_bed,
     )
     cmd = "saltation " + " ".join(shlex.quote(a) for a in sys.argv[1:])
     path = generate(params, args.out, work_dir=args.work_dir, command_line=cmd, y_max_plus=args.y_max_plus, dtype=args.dtype)
@@ -451,6 +486,16 @@ def build_parser() -> argparse.ArgumentParser:
     fg.add_argument("--initial", choices=("map", "perturb"), default="map")
     fg.add_argument("--y-max-plus", type=float, default=None)
     fg.add_argument("--dtype", choices=("float32", "int16"), default="float32")
+    fg.add_argument("--bed", choices=("smooth", "porous"), default="smooth",
+                    help="smooth walls, or a sand bed inside the LES: a porous layer of packed grains with Ergun drag "
+                         "(SPEC §3 rough bed; y = 0 of the dataset is then the bed top)")
+    fg.add_argument("--bed-d-plus", type=float, default=19.5,
+                    help="bed grain diameter in wall units = the grains' Re* = u* d/nu (default 19.5: Nino & Garcia's "
+                         "stages span 17.5-21.4 for d = 0.69 mm)")
+    fg.add_argument("--bed-depth", type=float, default=1.0, help="porous layer thickness below the bed top, in d")
+    fg.add_argument("--bed-porosity", type=float, default=0.2595,
+                    help="bulk porosity of the packing (0.2595 close-packed ... 0.476 simple cubic)")
+    fg.add_argument("--ny-bed", type=int, default=12, help="uniform cells across the porous layer")
     fg.set_defaults(func=_flow_generate)
     return p
 

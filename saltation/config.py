@@ -66,6 +66,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, ClassVar, Iterable, Mapping
 
+from flowfields.dataset import SHIPPED_DATASETS
+
 __all__ = [
     "GRAVITY",
     "PAPER_DOMAIN_M",
@@ -346,8 +348,14 @@ class FlowConfig(_Table):
                        doc='flow source: "les" (stored snapshots), "loglaw" (analytic mean '
                            'profile) or "still" (quiescent fluid, settling)')
     dataset: str | None = _key(kind="path",
-                               doc="LES dataset path (relative paths: to the case file); "
-                                   "absent: the shipped dataset")
+                               doc="LES dataset path (relative paths: to the case file), or the name "
+                                   'of a shipped one: "sandbed395" (a sand bed inside the LES, grain '
+                                   'd+ = 19.5) or "channel395" (smooth walls, the paper\'s set-up); '
+                                   "absent: channel395")
+    bed: str = _key("auto", kind="choice", choices=("auto", "smooth", "rough"),
+                    doc='what the LES dataset must carry: "rough" (a sand bed inside the LES; a '
+                        'smooth-wall dataset is refused), "smooth", or "auto" (as the dataset is); '
+                        "over a rough bed the grains' Re* must lie within 20 % of the bed grain's d+")
     tau_ratio: float | None = _key(kind="float", gt=0.0,
                                    doc="flow intensity τ*/τ*c (give this or shear_velocity)")
     shear_velocity: float | None = _key(kind="float", unit="m/s", gt=0.0,
@@ -1007,6 +1015,8 @@ def _resolve_paths(tables: dict[str, dict[str, Any]], base: Path) -> None:
     for table, key in _path_keys():
         value = tables.get(table, {}).get(key)
         if isinstance(value, str) and value.strip():
+            if key == "dataset" and value in SHIPPED_DATASETS:
+                continue  # a shipped dataset's name
             p = Path(value).expanduser()
             tables[table][key] = os.path.normpath(p if p.is_absolute() else base / p)
 

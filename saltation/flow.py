@@ -77,6 +77,47 @@ def grain_velocity(f, loc, nodes):
     return velocity_in_cell(f, nodes, loc[2], loc[5], loc[8], loc[14], loc[13])
 
 
+# A rough-bed dataset serves grains whose d⁺ = Re* lies within 20 % of its bed grain's d⁺:
+# Colebrook's ΔU⁺ changes by (1/κ)·0.3k/(1 + 0.3k)·ln(1.2) ≈ 0.4 u⁺ over that range at
+# k⁺ ≈ 20 (about 5 % of u⁺ one diameter above the bed), below the spread of the mean
+# near-bed velocity between published sand-bed profiles (ΔU⁺ ≈ 4–7, SPEC §3); the Niño &
+# García stages (Re* = 17.5–21.4 for d = 0.69 mm) then fit one dataset.
+BED_TOLERANCE = 0.20
+BED_MODES = ("auto", "smooth", "rough")
+
+
+class BedMismatch(ValueError):
+    """The flow dataset's bed does not fit the run (the message says which one to make)."""
+
+
+def check_bed(dataset, re_star: float, bed: str = "auto", where: str = "") -> None:
+    """Refuse a run whose grains do not fit the dataset's bed (SPEC §3 rough bed).
+
+    bed = "rough" requires a rough-bed dataset, "smooth" a smooth-wall one, "auto" takes
+    the dataset as it is. Over a rough bed the grain's Re* must lie within BED_TOLERANCE
+    of the bed grain's d⁺."""
+    if bed not in BED_MODES:
+        raise ValueError(f"flow.bed = {bed!r} is not allowed; use one of {', '.join(BED_MODES)}")
+    info = getattr(dataset, "bed", None)
+    name = where or str(getattr(dataset, "path", "") or "the flow dataset")
+    make = ("saltation flow generate --bed porous --bed-d-plus {dp:.1f} --out DATASET "
+            "(then [flow] dataset = \"DATASET\")")
+    if bed == "rough" and not info:
+        raise BedMismatch(f"flow.bed = \"rough\" but {name} has no bed metadata (meta.json \"bed\"): it is a "
+                          f"smooth-wall LES; make a rough-bed dataset with: " + make.format(dp=re_star))
+    if bed == "smooth" and info:
+        raise BedMismatch(f"flow.bed = \"smooth\" but {name} is a rough-bed dataset (bed grain d+ = "
+                          f"{info['d_plus']:.2f}); choose a smooth-wall dataset or flow.bed = \"rough\"")
+    if info:
+        dp = float(info["d_plus"])
+        if abs(re_star / dp - 1.0) > BED_TOLERANCE:
+            raise BedMismatch(
+                f"this run's grains have Re* = u* d/nu = {re_star:.2f}, but {name} was made for a bed of grains with "
+                f"d+ = {dp:.2f} (runs within {100 * BED_TOLERANCE:.0f} %: Re* {dp * (1 - BED_TOLERANCE):.2f}-"
+                f"{dp * (1 + BED_TOLERANCE):.2f}); the near-bed flow over other grains differs. Make the right "
+                f"dataset with: " + make.format(dp=re_star))
+
+
 def flow_top_in_d(dataset, re_star: float) -> float:
     """Top of the stored flow in grain diameters above the bed top."""
     return float(dataset.y[-1]) / re_star

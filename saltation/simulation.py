@@ -24,6 +24,7 @@ import pandas as pd
 from . import history
 from .bed import run_bed_parameters
 from .config import Case, dump_toml, load_case, resolve_domain
+from .flow import check_bed
 from .forces import make_coefficients
 from .initial import initial_conditions, initial_conditions_apart
 from .integrator import NOT_FINITE, make_state, make_workspace
@@ -94,7 +95,9 @@ def open_flow(case: Case):
     from flowfields import open_dataset, profile_dataset
 
     if case.flow.source == "les":
-        return open_dataset(case.flow.dataset)
+        ds = open_dataset(case.flow.dataset)
+        check_bed(ds, case.shear_reynolds, case.flow.bed)  # before any long work
+        return ds
     re_star = case.shear_reynolds
     if case.flow.source == "still":
         return profile_dataset("still", y_top_plus=1e4 * re_star)
