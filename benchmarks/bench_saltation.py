@@ -246,7 +246,7 @@ def _history_steps(coef, hc, dt, n_steps, vel, uf, hist_i, slip, meta, tail):
         for p in range(n):
             history_end_step(vel[p], uf[p], hist_i[p], coef[BASSET_PREFACTOR], dt, slip[p], meta[p], tail[p],
                              hc.window_weights, hc.tail_weight, hc.tail_decay, hc.tail_c_old, hc.tail_c_new,
-                             hist_i[p])
+                             hist_i[p], hc.tail_time)
 
 
 def _best_cpu(fn, repeat):

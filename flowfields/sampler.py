@@ -84,7 +84,7 @@ class FlowArrays(NamedTuple):
     dt: float  # snapshot interval in t⁺ (loop period nt*dt); 1.0 when nt == 1
     nt: int
     y_floor: float  # fluid at rest below: 0 (smooth wall) or the bottom of a rough bed's layer (< 0)
-    sublayer_slope: float  # mean u⁺ slope below y[0]: 1 (viscous sublayer) or 0 (inside a rough bed)
+    sublayer_slope: float  # below y[0]: 1 the viscous sublayer u⁺ = y⁺, 0 linear to zero (inside a rough bed)
 
 
 @njit(cache=True, inline="always", error_model="numpy")
@@ -248,21 +248,24 @@ def _store_component(f, c, v000, v100, v010, v110, v001, v101, v011, v111,
 def _sublayer_with_gradient(f, yp, u, g, dudt):
     # SPEC §3 viscous sublayer between the wall and the first cell centre (slope s = 1),
     # or linear to zero at a rough bed's floor (s = 0); heights from the floor
-    s = f.sublayer_slope
     y1 = f.y[0] - f.y_floor
     yq = yp - f.y_floor
     r = yq / y1
     u1x = u[0]
     u1y = u[1]
     u1z = u[2]
-    u[0] = s * yq + r * (u1x - s * y1)
+    if f.sublayer_slope != 0.0:  # written as before the rough bed: same bits for a smooth wall
+        u[0] = yq + r * (u1x - y1)
+        g[0, 1] = 1.0 + (u1x - y1) / y1
+    else:
+        u[0] = r * u1x
+        g[0, 1] = u1x / y1
     u[1] = r * u1y
     u[2] = r * u1z
     for c in range(3):
         dudt[c] = r * dudt[c]
         g[c, 0] = r * g[c, 0]
         g[c, 2] = r * g[c, 2]
-    g[0, 1] = s + (u1x - s * y1) / y1
     g[1, 1] = u1y / y1
     g[2, 1] = u1z / y1
 
@@ -303,11 +306,13 @@ def velocity_in_cell(f, c, wx, wy, wz, yp, sublayer):
     u1 = _trilinear(c[1], c[4], c[7], c[10], c[13], c[16], c[19], c[22], wx, wy, wz) * f.scale[1] + f.offset[1]
     u2 = _trilinear(c[2], c[5], c[8], c[11], c[14], c[17], c[20], c[23], wx, wy, wz) * f.scale[2] + f.offset[2]
     if sublayer:
-        s = f.sublayer_slope
         y1 = f.y[0] - f.y_floor
         yq = yp - f.y_floor
         r = yq / y1
-        u0 = s * yq + r * (u0 - s * y1)
+        if f.sublayer_slope != 0.0:  # the viscous sublayer, as before the rough bed
+            u0 = yq + r * (u0 - y1)
+        else:
+            u0 = r * u0
         u1 = r * u1
         u2 = r * u2
     return u0, u1, u2

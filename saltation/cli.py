@@ -385,17 +385,49 @@ def _validate(args) -> int:
     if not args.duration_scale > 0:
         raise UsageError(f"--duration-scale {args.duration_scale}: must be a positive number")
     _out_dir(args.out)
-    res = run_validation(args.out, data=args.data, duration_scale=args.duration_scale, ablation=not args.no_ablation)
-    print(f"{'tau*/tau*c':>10} {'jumps':>6} {'H/d':>12} {'vR':>5} {'L/d':>13} {'vR':>5} {'U/u*':>12} {'vR':>5}")
-    for r in res["validation"]:
-        print(f"{r['tau_ratio']:10.2f} {r['count']:6d} {r['H_mean']:6.2f}±{r['H_std']:<5.2f} {r['H_vanrijn']:5.2f} "
-              f"{r['L_mean']:6.2f}±{r['L_std']:<6.2f} {r['L_vanrijn']:5.2f} {r['U_mean']:6.2f}±{r['U_std']:<5.2f} {r['U_vanrijn']:5.2f}")
-    if "ablation" in res:
-        print("force ablation at tau*/tau*c = 1.79 (change vs all forces on):")
-        for r in res["ablation"]:
-            print(f"  {r['variant']:<24} H {r['H_change_pct']:+6.1f} %   L {r['L_change_pct']:+6.1f} %   U {r['U_change_pct']:+6.1f} %")
-    print(f"wrote {args.out}/validation.csv, validation.png" + (", ablation.csv" if "ablation" in res else ""))
+    flows = tuple(args.flow) if args.flow else None
+    if flows:
+        from .validate import FLOWS
+
+        bad = [f for f in flows if f not in FLOWS]
+        if bad:
+            raise UsageError(f"--flow {bad[0]!r}: choose from {', '.join(repr(f) for f in FLOWS)}")
+    res = run_validation(args.out, data=args.data, duration_scale=args.duration_scale, ablation=not args.no_ablation,
+                         sensitivity=not args.no_sensitivity, **({"flows": flows} if flows else {}))
+    print_validation(res)
+    print(f"wrote {args.out}/validation.csv, references.csv, validation.png"
+          + (", sensitivity.csv" if "sensitivity" in res else "") + (", ablation.csv" if "ablation" in res else ""))
     return 0
+
+
+def print_validation(res: dict) -> None:
+    """The validation table: model mean ± std against each regression (ratio model/regression)."""
+    import pandas as pd
+
+    rows = res["validation"]
+    refs = pd.DataFrame(res["references"])
+    print("published regressions (H/d, L/d, U/u*; where each was read: docs/references.md):")
+    for ratio, g in refs.groupby("tau_ratio"):
+        cells = [f"{r['regression']}: " + ", ".join(f"{q} {r[q]:.2f}" for q in ("H", "L", "U") if r[q] == r[q])
+                 for _, r in g.iterrows()]
+        print(f"  tau*/tau*c = {ratio}: " + "; ".join(c for c in cells if ":" in c and c.split(": ")[1]))
+    for q, unit in (("H", "d"), ("L", "d"), ("U", "u*")):
+        print(f"\n{q} ({unit}): model mean ± std [jumps], ratio to each regression, envelope ±25 % test")
+        for r in rows:
+            ratios = "  ".join(f"/{k.split(' / ')[1]} {v:.2f}" for k, v in r.items()
+                               if k.startswith(f"{q} / ") and v == v)
+            env = r.get(f"{q}_in_envelope")
+            env_s = "" if env is None else (" IN " if env else " OUT") + f" [{r[f'{q}_env_lo']:.2f}, {r[f'{q}_env_hi']:.2f}]"
+            print(f"  {r['flow']:>13} {r['tau_ratio']:4.2f}: {r[f'{q}_mean']:6.2f} ± {r[f'{q}_std']:<5.2f} [{r['count']}]"
+                  f"{env_s}  {ratios}")
+    grows = {r["flow"]: r["grows_with_stage"] for r in rows}
+    print("\nH, L and U all grow with tau*/tau*c: " + ", ".join(f"{k} {'yes' if v else 'NO'}" for k, v in grows.items()))
+    for key, title in (("sensitivity", "sensitivity"), ("ablation", "force ablation")):
+        if key in res:
+            print(f"\n{title} at tau*/tau*c = {res[key][0].get('tau_ratio', 1.79)} (change vs the first row):")
+            for r in res[key]:
+                print(f"  {r['variant']:<60} H {r['H_mean']:5.2f} ({r['H_change_pct']:+6.1f} %)  L {r['L_mean']:6.2f} "
+                      f"({r['L_change_pct']:+6.1f} %)  U {r['U_mean']:5.2f} ({r['U_change_pct']:+6.1f} %)  [{r['count']}]")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -443,6 +475,9 @@ def build_parser() -> argparse.ArgumentParser:
     v.add_argument("--out", default="validation", help="output folder (default ./validation)")
     v.add_argument("--duration-scale", type=float, default=1.0, help="scale the cases' durations (quick looks)")
     v.add_argument("--no-ablation", action="store_true", help="skip the force-ablation runs")
+    v.add_argument("--flow", action="append", default=None,
+                   help='flow(s) to run: "rough LES" (default first), "smooth LES", "rough log law"; repeat the option; default all three')
+    v.add_argument("--no-sensitivity", action="store_true", help="skip the sensitivity table")
     v.set_defaults(func=_validate)
 
     flow = sub.add_parser("flow", help="make, ingest and describe LES datasets")

@@ -40,7 +40,7 @@ from numba import njit, prange
 
 from .cells import min_image
 from .clusters import OK, _impulse, _lowest, _quat_to_matrix, _rotate_quat, _world_inverse_inertia
-from .history import META_COUNT
+from .history import history_mark_impact
 from .packed_bed import BED_CENTRE_Y, _nearest_entry, bed_cell, bed_offset, bed_stencil_cell, end_jump
 
 MAX_BOUNCES = 4  # impulses per grain and step at most
@@ -192,7 +192,7 @@ def packed_bed_check_cluster(st, w, p, t, dt, step, bed, pb, last_contact):
             st.jump_t0[p] = t_hit
             st.jump_x0[p] = st.pos[p, 0]
         for kk in range(st.cstart[p], st.cstart[p + 1]):
-            st.hist_meta[kk, META_COUNT] = 0  # the Basset history restarts (history.py)
+            history_mark_impact(st.hist_meta[kk])  # the next step takes the slip step (history.py)
         _move(st, w, p, tau)
         remaining = tau
         if remaining <= 0.0:

@@ -103,7 +103,7 @@ import numpy as np
 from numba import njit, objmode, prange
 
 from .clusters import OK, _quat_to_matrix, step_grain
-from .history import META_COUNT
+from .history import history_mark_impact
 
 __all__ = ["ClusterContacts", "make_cluster_contacts", "contact_parameters", "substeps", "contact_phase",
            "build_contact_list",
@@ -908,7 +908,7 @@ def _finish_one(st, w, cc, p):
         # the Basset memory (as a bed impact)
         st.fresh[p] = 0
         for k in range(st.cstart[p], st.cstart[p + 1]):
-            st.hist_meta[k, META_COUNT] = 0
+            history_mark_impact(st.hist_meta[k])  # the next step takes the slip step (history.py)
         low = 1e300
         for k in range(st.cstart[p], st.cstart[p + 1]):
             y = st.pos[p, 1] + rot[1, 0] * st.r_body[k, 0] + rot[1, 1] * st.r_body[k, 1] \

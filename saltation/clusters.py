@@ -106,7 +106,7 @@ from .bed import BED_MODEL, virtual_bed_normal
 from .forces import (CL, CM, C_OMEGA, COS_SLOPE, ON_ADDED_MASS, ON_BASSET, ON_DRAG,
                      ON_FLUID_ACC, ON_LIFT, ON_MAGNUS, ON_WEIGHT, RE_STAR, SIN_SLOPE,
                      TAU_STAR, drag_factor)
-from .history import META_COUNT, _advance, _integral3, history_reset
+from .history import META_COUNT, _advance, _integral3, age_jumps, history_mark_impact, history_start_step, jump_impulse
 from .jumps import BED_MIN_JUMP_DURATION, BED_MIN_JUMP_HEIGHT, close_jump
 from .rng import uniform2
 from .spin import SPIN_TABLE_C, _spin_row
@@ -151,8 +151,8 @@ class ClusterState(NamedTuple):
     status: np.ndarray
     above_top: np.ndarray
     hist_slip: np.ndarray  # (K, N_w+2, 3)
-    hist_meta: np.ndarray  # (K, 2) int64
-    hist_tail: np.ndarray  # (K, 10, 3)
+    hist_meta: np.ndarray  # (K, 2 + history.N_JUMPS) int64
+    hist_tail: np.ndarray  # (K, 10 + history.N_JUMPS, 3)
     hist_i: np.ndarray  # (K, 3)
     fresh: np.ndarray  # (N,) 1 when the component samples hold the fluid now
     spin_drag: np.ndarray  # (1,) 1.0: rotational drag of the components on (0.0: vacuum)
@@ -593,14 +593,18 @@ def _basset_end_step(coef, st, w, hc, p, dt):
         row = min(st.hist_meta[k, META_COUNT], hc.window_weights.shape[0] - 1)
         g0 = hc.window_weights[row, 0]
         ck = 1.5 * SQRT_PI * st.d_comp[k] ** 2 / math.sqrt(re_star)
-        # world vector e = I* − γ₀ u_f − I_n, kept in ft[6:9] for the push below
-        e0 = i0 - g0 * w.uf[k, 0] - st.hist_i[k, 0]
-        e1 = i1 - g0 * w.uf[k, 1] - st.hist_i[k, 1]
-        e2 = i2 - g0 * w.uf[k, 2] - st.hist_i[k, 2]
-        # keep I* for the update of I_{n+1}
-        st.hist_i[k, 0] = i0
-        st.hist_i[k, 1] = i1
-        st.hist_i[k, 2] = i2
+        # world vector e = I* − γ₀ u_f − I_n (+ the exact impulse Q of kept slip steps over
+        # the step, as Q/h: history.py), kept in ft[6:9] for the push below
+        q0, q1, q2 = jump_impulse(st.hist_meta[k], st.hist_tail[k], dt)
+        e0 = i0 - g0 * w.uf[k, 0] - st.hist_i[k, 0] + q0 / h
+        e1 = i1 - g0 * w.uf[k, 1] - st.hist_i[k, 1] + q1 / h
+        e2 = i2 - g0 * w.uf[k, 2] - st.hist_i[k, 2] + q2 / h
+        # keep I* (and what kept slip steps passing into the tail add) for I_{n+1}
+        f0, f1, f2 = age_jumps(st.hist_meta[k], st.hist_tail[k], dt, st.hist_slip.shape[1] - 2, hc.tail_time,
+                               hc.tail_weight)
+        st.hist_i[k, 0] = i0 + f0
+        st.hist_i[k, 1] = i1 + f1
+        st.hist_i[k, 2] = i2 + f2
         # body frame, J_kᵀ e = (e, r × e)
         eb0 = rot[0, 0] * e0 + rot[1, 0] * e1 + rot[2, 0] * e2
         eb1 = rot[0, 1] * e0 + rot[1, 1] * e1 + rot[2, 1] * e2
@@ -849,7 +853,7 @@ def _bed_impact(st, w, p, t, dt, y_old, y_new, bed, seed):
     st.jump_ymax[p] = max(low2, 0.0)
     st.fresh[p] = 0
     for k in range(st.cstart[p], st.cstart[p + 1]):
-        st.hist_meta[k, META_COUNT] = 0
+        history_mark_impact(st.hist_meta[k])  # the next step takes the slip step (history.py)
 
 
 @njit(cache=True, _nrt=False, error_model="numpy")
@@ -876,7 +880,8 @@ def step_grain(f, coef, bed, seed, st, w, hc, p, t, dt):
             for i in range(3):
                 w.rw[kk, i] = rot[i, 0] * st.r_body[kk, 0] + rot[i, 1] * st.r_body[kk, 1] \
                     + rot[i, 2] * st.r_body[kk, 2]
-    if with_basset and st.hist_meta[st.cstart[p], META_COUNT] == 0:
+    if with_basset and st.hist_meta[st.cstart[p], META_COUNT] <= 0:
+        # release, or the step after an impact: each component's slip step kept, or a restart
         ox, oy, oz = x0[10], x0[11], x0[12]
         for kk in range(st.cstart[p], st.cstart[p + 1]):
             rx, ry, rz = w.rw[kk, 0], w.rw[kk, 1], w.rw[kk, 2]
@@ -884,9 +889,8 @@ def step_grain(f, coef, bed, seed, st, w, hc, p, t, dt):
             sl[0] = x0[3] + oy * rz - oz * ry - w.uf[kk, 0]
             sl[1] = x0[4] + oz * rx - ox * rz - w.uf[kk, 1]
             sl[2] = x0[5] + ox * ry - oy * rx - w.uf[kk, 2]
-            for i in range(3):
-                st.hist_i[kk, i] = 0.0
-            history_reset(sl, st.hist_slip[kk], st.hist_meta[kk], st.hist_tail[kk])
+            history_start_step(sl, st.hist_slip[kk], st.hist_meta[kk], st.hist_tail[kk], st.hist_i[kk], dt,
+                               hc.keep_impacts, hc.tail_time, hc.tail_weight)
     _rhs(coef, st, w, p, x0, k[0], with_basset)
     for stage in range(1, 4):
         h = 0.5 * dt if stage < 3 else dt

@@ -168,7 +168,7 @@ from numba import njit, prange
 from .bed import virtual_bed_normal
 from .cells import build_cells, min_image, stencil_cells
 from .contacts import LEVER_RADIUS, ContactList, hard_sphere_collisions, normal_damping, rebuild
-from .history import META_COUNT
+from .history import history_mark_impact
 from .jumps import close_jump
 from .rng import uniform2
 
@@ -1405,7 +1405,7 @@ def _scatter(cs, st, cl, bc, ph, skin_half):
             vel[g, c] += cs.dev[a, 3 + c]
             spin[g, c] += cs.dev[a, 6 + c]
         st.fresh[g] = 0
-        st.hist_meta[g, META_COUNT] = 0
+        history_mark_impact(st.hist_meta[g])  # the next step takes the slip step (history.py)
         if pos[g, 1] > st.jump_ymax[g]:  # the bed pass skips the grains sub-stepped here
             st.jump_ymax[g] = pos[g, 1]
     ph.n_act[0] = na
@@ -1547,5 +1547,5 @@ def hard_contact_phase(st, cl, restitution, friction, before):
     if count > 0:
         for i in range(n):
             if cl.collisions[i] != before[i]:
-                st.hist_meta[i, META_COUNT] = 0
+                history_mark_impact(st.hist_meta[i])  # the next step takes the slip step (history.py)
     return count

@@ -412,6 +412,11 @@ class ForcesConfig(_Table):
     added_mass_coefficient: float = _key(0.5, kind="float", ge=0.0, doc="Cm")
     lift_coefficient: float = _key(0.2, kind="float", ge=0.0, doc="C_L")
     magnus_coefficient: float = _key(1.0, kind="float", ge=0.0, doc="C_Ω")
+    basset_impacts: str = _key("keep", kind="choice", choices=("keep", "restart"),
+                               doc='Basset history at bed impacts and grain contacts: "keep" (the '
+                                   'impulsive slip change enters the history exactly, Lukerchenko '
+                                   'et al. 2012; SPEC §2) or "restart" (the memory restarts at every '
+                                   'impact, the first round\'s choice; for comparison)')
     basset_window: int = _key(10, kind="int", ge=2,
                               doc="steps in the exact quadrature window of the history "
                                   "integral (van Hinsberg et al. 2011)")

@@ -41,14 +41,15 @@ State (allocated by the caller for all N particles; ``allocate_history_state``)
 -----------------------------------------------------------------------------
 ===============  ====================  =========================================
 slip_hist        float64 [N, N_w+2, 3]  ring buffer of slip samples u_r(t - jΔt)
-meta             int64   [N, 2]         META_HEAD: slot of the newest sample,
+meta             int64   [N, 2+J]       META_HEAD: slot of the newest sample,
                                         META_COUNT: samples since reset
-                                        (capped at N_w + 2)
-tail             float64 [N, m, 3]      tail modes Fᵢ
+                                        (capped at N_w + 2; negative: an impact
+                                        is pending), then the J = N_JUMPS ages
+tail             float64 [N, m+J, 3]    tail modes Fᵢ, then the kept steps Δu_r
 ===============  ====================  =========================================
 
-Memory per particle: 24 N_w + 304 bytes (N_w = 100: 2 704 B), independent of
-the run length.  Shared coefficients (``make_history_coefficients``): a weight
+Memory per particle: 24 N_w + 304 + 32 J bytes (N_w = 100, J = 4: 2 832 B),
+independent of the run length.  Shared coefficients (``make_history_coefficients``): a weight
 table of (N_w+3)·(N_w+2) doubles (81 kB for N_w = 100) and 4 arrays of m.
 
 Use inside classic RK4 (the choice made here)
@@ -89,19 +90,38 @@ reset the history starts with a finite acceleration, I ≈ 2 g(0) √t, whose
 curvature is singular at t = 0, and the error sums to O(Δt^{3/2}).  The tests
 measure both orders against exact solutions of the Basset equation.
 
-Reset at bed impact
--------------------
-The caller resets a particle's history (``history_reset`` with the
-post-rebound slip as the first sample) at every bed impact and at its release.
-A rebound changes the velocity by a finite jump in zero time: as an
-"acceleration" it is a Dirac pulse, and the Boussinesq-Basset kernel would turn
-it into a force ∝ Δu/√(t - t_impact) that persists through the next jump.
-That kernel describes the unsteady Stokes boundary layer of a sphere under
-smooth acceleration; it says nothing valid about the wake re-formed by a
-collision.  Restarting the memory at the impact keeps only the smooth
-in-flight accelerations.  Consequence: the history force is zero at take-off
-and builds up as √t over the jump; memory of earlier jumps is discarded, and a
-history accumulated before the impact cannot push the grain back after it.
+Impacts and contacts keep the history (default; SPEC §2 revised)
+------------------------------------------------------------------
+A bed impact or a grain contact changes the slip impulsively: a step Δu_r at t_c, whose
+exact contribution to the integral is Δu_r/√(t − t_c). Lukerchenko et al. (2012) show
+that this collision-generated part of the Basset force is of the same size as the
+flight part and largely cancels it, so it is kept: the impact site only *marks* the
+history (``history_mark_impact``: the sample count turns negative, nothing is lost), and
+the next step (``history_start_step``) finds the step in the slip, Δu_r = u_r(now) −
+newest sample, and
+
+* shifts the stored samples by Δu_r, so the window keeps a continuous (smooth) slip whose
+  quadrature is unchanged (its node derivatives are differences of samples);
+* keeps the step exactly in one of N_JUMPS slots per grain (its age in steps in
+  ``meta[META_JUMPS + j]``, −1 when free; Δu_r in ``tail[N_MODES + j]``): over each step
+  [t_n, t_n + Δt] it adds the exact impulse −P Δu_r · 2(√(t_n + Δt − t_c) − √(t_n − t_c))
+  (``history_end_step``), no quadrature of the singular kernel;
+* once the step is a window length old (t − t_c = t_win) it passes into the exponential
+  tail modes exactly — mode i gains √(e/tᵢ) exp(−(t − t_c)/(2tᵢ)) Δu_r, the tail's own
+  kernel — and the slot is freed. More than N_JUMPS steps inside one window (a grain
+  chattering on the bed) fold the oldest early, with the tail kernel at its age.
+
+A step at the end of a hydrodynamic step (the bed and contact passes follow free flight)
+is at a node of the time grid, so this is exact up to the tail's kernel error; the
+smooth part keeps its second order. The RK4 stages hold the smooth I_n only; the steps'
+impulses enter at the step end (an O(Δt) change of the stage forces, not of the impulse).
+Memory stays bounded: 32 bytes more per slot.
+
+``[forces] basset_impacts = "restart"`` (kept for comparison) restarts the memory at
+every impact instead (``history_reset`` with the post-rebound slip as the first sample),
+the first round's choice: the history force is zero at take-off and builds up as √t
+over the jump; memory of earlier jumps and of the impulsive change itself is dropped.
+Release (a grain's first step) always starts a fresh history.
 """
 
 import math
@@ -121,6 +141,9 @@ DEFAULT_WINDOW_STEPS = 100
 
 META_HEAD = 0
 META_COUNT = 1
+META_JUMPS = 2   # meta[META_JUMPS + j]: age in steps of kept slip step j (-1: free)
+N_JUMPS = 4      # slip steps kept exactly inside the window, per grain
+IMPACTS = ("keep", "restart")
 
 
 def basset_acceleration_prefactor(alpha, re_star):
@@ -207,12 +230,17 @@ class HistoryCoefficients(NamedTuple):
     dt: float
     n_window: int
     t_window: float
+    tail_time: np.ndarray        # (m,) tᵢ (absolute, d/u*): folding a slip step into the tail
+    keep_impacts: bool           # True: impacts keep the history (slip steps); False: restart
 
 
 def make_history_coefficients(dt, n_window=DEFAULT_WINDOW_STEPS,
-                              tail_times=TAIL_TIMES, tail_weights=TAIL_WEIGHTS):
+                              tail_times=TAIL_TIMES, tail_weights=TAIL_WEIGHTS, impacts="keep"):
     """Shared (all particles) coefficients for a fixed step ``dt`` and a window of
-    ``n_window`` ≥ 2 steps (t_win = n_window·dt)."""
+    ``n_window`` ≥ 2 steps (t_win = n_window·dt); ``impacts``: "keep" (the slip step
+    enters the history) or "restart" (the memory restarts at every impact)."""
+    if impacts not in IMPACTS:
+        raise ValueError(f"impacts must be one of {IMPACTS}, got {impacts!r}")
     if not dt > 0:
         raise ValueError(f"dt must be > 0, got {dt!r}")
     n_window = int(n_window)
@@ -233,7 +261,7 @@ def make_history_coefficients(dt, n_window=DEFAULT_WINDOW_STEPS,
     c_new = amp * (phi0 - phi1)
     c_old = amp * phi1
     return HistoryCoefficients(table, np.exp(-x), c_old, c_new, tail_weights.copy(),
-                               float(dt), n_window, t_win)
+                               float(dt), n_window, t_win, ti, impacts == "keep")
 
 
 class HistoryState(NamedTuple):
@@ -242,16 +270,17 @@ class HistoryState(NamedTuple):
     tail: np.ndarray        # float64 (N, m, 3)
 
 
-def allocate_history_state(n_particles, n_window=DEFAULT_WINDOW_STEPS, n_modes=N_MODES):
-    """Zeroed history state for ``n_particles`` (call history_reset per particle)."""
-    return HistoryState(np.zeros((n_particles, n_window + 2, 3)),
-                        np.zeros((n_particles, 2), dtype=np.int64),
-                        np.zeros((n_particles, n_modes, 3)))
+def allocate_history_state(n_particles, n_window=DEFAULT_WINDOW_STEPS):
+    """Zeroed history state for ``n_particles`` (a fresh history starts at the first step)."""
+    meta = np.zeros((n_particles, META_JUMPS + N_JUMPS), dtype=np.int64)
+    meta[:, META_JUMPS:] = -1
+    return HistoryState(np.zeros((n_particles, n_window + 2, 3)), meta,
+                        np.zeros((n_particles, N_MODES + N_JUMPS, 3)))
 
 
-def history_state_bytes(n_window=DEFAULT_WINDOW_STEPS, n_modes=N_MODES):
-    """Bytes of history state per particle: 24 N_w + 24 m + 64 (= 24 N_w + 304)."""
-    return 8 * (3 * (n_window + 2) + 2 + 3 * n_modes)
+def history_state_bytes(n_window=DEFAULT_WINDOW_STEPS):
+    """Bytes of history state per particle: 24 N_w + 24 m + 64 + 32 J (= 24 N_w + 432)."""
+    return 8 * (3 * (n_window + 2) + 2 + 3 * N_MODES + 4 * N_JUMPS)
 
 
 # ---------------------------------------------------------------- per-particle kernels
@@ -266,6 +295,120 @@ def history_reset(slip0, slip_hist, meta, tail):
     for k in range(tail.shape[0]):
         for c in range(3):
             tail[k, c] = 0.0
+    for j in range(N_JUMPS):
+        meta[META_JUMPS + j] = -1
+
+
+@njit(cache=True, _nrt=False)
+def history_mark_impact(meta):
+    """An impact or contact changed the grain's velocity impulsively: the next step takes
+    the slip step into the history, or restarts it (``history_start_step``)."""
+    if meta[META_COUNT] > 0:
+        meta[META_COUNT] = -meta[META_COUNT]
+
+
+@njit(cache=True, _nrt=False)
+def _fold_jump(meta, tail, j, age, dt, tail_time, tail_weight):
+    # slip step j, `age` steps old, into the tail modes: Δ √(e/tᵢ) exp(-age Δt/(2tᵢ));
+    # returns what it adds to I (Σ aᵢ × that)
+    s0 = 0.0
+    s1 = 0.0
+    s2 = 0.0
+    for k in range(N_MODES):
+        amp = math.sqrt(math.e / tail_time[k]) * math.exp(-age * dt / (2.0 * tail_time[k]))
+        d0 = amp * tail[N_MODES + j, 0]
+        d1 = amp * tail[N_MODES + j, 1]
+        d2 = amp * tail[N_MODES + j, 2]
+        tail[k, 0] += d0
+        tail[k, 1] += d1
+        tail[k, 2] += d2
+        s0 += tail_weight[k] * d0
+        s1 += tail_weight[k] * d1
+        s2 += tail_weight[k] * d2
+    for c in range(3):
+        tail[N_MODES + j, c] = 0.0
+    meta[META_JUMPS + j] = -1
+    return s0, s1, s2
+
+
+@njit(cache=True, _nrt=False)
+def history_start_step(slip_now, slip_hist, meta, tail, i_hist, dt, keep, tail_time, tail_weight):
+    """At the start of a step, before the history force is used: a fresh history at
+    release (count 0) or, after an impact (count < 0), the slip step kept (``keep``) or
+    the memory restarted. slip_now: the slip u_r now (after the impact)."""
+    count = meta[META_COUNT]
+    if count > 0:
+        return
+    if count == 0 or not keep:
+        history_reset(slip_now, slip_hist, meta, tail)
+        for c in range(3):
+            i_hist[c] = 0.0
+        return
+    count = -count
+    meta[META_COUNT] = count
+    head = meta[META_HEAD]
+    d0 = slip_now[0] - slip_hist[head, 0]
+    d1 = slip_now[1] - slip_hist[head, 1]
+    d2 = slip_now[2] - slip_hist[head, 2]
+    # the stored samples continue the slip smoothly at its new level
+    for j in range(slip_hist.shape[0]):
+        slip_hist[j, 0] += d0
+        slip_hist[j, 1] += d1
+        slip_hist[j, 2] += d2
+    free = -1
+    oldest = -1
+    for j in range(N_JUMPS):
+        a = meta[META_JUMPS + j]
+        if a < 0:
+            if free < 0:
+                free = j
+        elif oldest < 0 or a > meta[META_JUMPS + oldest]:
+            oldest = j
+    if free < 0:  # all slots taken inside one window: the oldest goes to the tail early
+        f0, f1, f2 = _fold_jump(meta, tail, oldest, meta[META_JUMPS + oldest], dt, tail_time, tail_weight)
+        i_hist[0] += f0
+        i_hist[1] += f1
+        i_hist[2] += f2
+        free = oldest
+    meta[META_JUMPS + free] = 0
+    tail[N_MODES + free, 0] = d0
+    tail[N_MODES + free, 1] = d1
+    tail[N_MODES + free, 2] = d2
+
+
+@njit(cache=True, _nrt=False)
+def jump_impulse(meta, tail, dt):
+    # ∫ over the coming step of Σ Δ/√(t - t_c): Σ Δ · 2(√((a+1)Δt) - √(aΔt))
+    q0 = 0.0
+    q1 = 0.0
+    q2 = 0.0
+    for j in range(N_JUMPS):
+        a = meta[META_JUMPS + j]
+        if a >= 0:
+            w = 2.0 * (math.sqrt((a + 1.0) * dt) - math.sqrt(a * dt))
+            q0 += w * tail[N_MODES + j, 0]
+            q1 += w * tail[N_MODES + j, 1]
+            q2 += w * tail[N_MODES + j, 2]
+    return q0, q1, q2
+
+
+@njit(cache=True, _nrt=False)
+def age_jumps(meta, tail, dt, n_window, tail_time, tail_weight):
+    # one step older; a window length old: into the tail. Returns what the folded steps
+    # add to I at the new time
+    s0 = 0.0
+    s1 = 0.0
+    s2 = 0.0
+    for j in range(N_JUMPS):
+        a = meta[META_JUMPS + j]
+        if a >= 0:
+            meta[META_JUMPS + j] = a + 1
+            if a + 1 >= n_window:
+                f0, f1, f2 = _fold_jump(meta, tail, j, a + 1, dt, tail_time, tail_weight)
+                s0 += f0
+                s1 += f1
+                s2 += f2
+    return s0, s1, s2
 
 
 @njit(cache=True, _nrt=False)
@@ -286,7 +429,7 @@ def _integral3(slip_hist, meta, tail, window_weights, tail_weight):
         s0 += wgt * slip_hist[slot, 0]
         s1 += wgt * slip_hist[slot, 1]
         s2 += wgt * slip_hist[slot, 2]
-    for k in range(tail.shape[0]):
+    for k in range(N_MODES):
         a = tail_weight[k]
         s0 += a * tail[k, 0]
         s1 += a * tail[k, 1]
@@ -335,7 +478,7 @@ def _advance(slip_hist, meta, tail, tail_decay, tail_c_old, tail_c_new):
                     - 0.5 * slip_hist[sB1, c]                             # Δt g_A
             else:
                 dg_old = 0.5 * (slip_hist[sB, c] - slip_hist[sA1, c])
-            for k in range(tail.shape[0]):
+            for k in range(N_MODES):
                 tail[k, c] = tail_decay[k] * tail[k, c] + tail_c_old[k] * dg_old \
                     + tail_c_new[k] * dg_new
     head += 1
@@ -366,15 +509,20 @@ def add_basset_acceleration(prefactor, i_start, out):
 @njit(cache=True, _nrt=False)
 def history_end_step(u, uf_new, i_start, prefactor, dt, slip_hist, meta, tail,
                      window_weights, tail_weight, tail_decay, tail_c_old, tail_c_new,
-                     i_next):
+                     i_next, tail_time):
     """End of an RK4 step with the history held at ``i_start`` = I_n in the stages.
 
     u: the RK4 velocity u* at t_{n+1}, replaced in place by the velocity with the
     trapezoidal history term -PΔt(I_n + I_{n+1})/2, its newest sample implicit;
     uf_new: fluid velocity at the grain at t_{n+1}.  Pushes u_r(t_{n+1}) and
     writes I_{n+1} into ``i_next``, which may be ``i_start`` itself: the next
-    step then needs no history_integral call (after a reset I = 0)."""
+    step then needs no history_integral call (after a reset I = 0). Kept slip steps
+    (module docstring) add their exact impulse over the step, then age."""
     head = _advance(slip_hist, meta, tail, tail_decay, tail_c_old, tail_c_new)
+    q0, q1, q2 = jump_impulse(meta, tail, dt)
+    u[0] -= prefactor * q0
+    u[1] -= prefactor * q1
+    u[2] -= prefactor * q2
     for c in range(3):
         slip_hist[head, c] = 0.0
     # I_{n+1} = I* + γ₀ u_r(t_{n+1}); I* = the integral with the newest sample zeroed
@@ -394,9 +542,10 @@ def history_end_step(u, uf_new, i_start, prefactor, dt, slip_hist, meta, tail,
     slip_hist[head, 0] = w0
     slip_hist[head, 1] = w1
     slip_hist[head, 2] = w2
-    i_next[0] = i0 + g0 * w0
-    i_next[1] = i1 + g0 * w1
-    i_next[2] = i2 + g0 * w2
+    f0, f1, f2 = age_jumps(meta, tail, dt, slip_hist.shape[0] - 2, tail_time, tail_weight)
+    i_next[0] = i0 + g0 * w0 + f0
+    i_next[1] = i1 + g0 * w1 + f1
+    i_next[2] = i2 + g0 * w2 + f2
 
 
 # ---------------------------------------------------------------- reference (tests)

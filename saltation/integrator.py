@@ -31,7 +31,7 @@ from .bed import bed_rebound, virtual_bed_normal
 from .flow import fluid_at_grain, gather_at, grain_velocity, locate_grain, same_cell
 from .forces import (BASSET_PREFACTOR, ON_ADDED_MASS, ON_BASSET, ON_FLUID_ACC, ON_LIFT, ON_MAGNUS, ON_SPIN,
                      R_SUBMERGED, RE_STAR, fluid_acceleration, weight_and_drag)
-from .history import META_COUNT, add_basset_acceleration, history_end_step, history_reset
+from .history import META_COUNT, add_basset_acceleration, history_end_step, history_mark_impact, history_start_step
 from .jumps import BED_MIN_JUMP_DURATION, BED_MIN_JUMP_HEIGHT, close_jump
 from .rng import uniform2
 from .spin import spin_rate
@@ -267,13 +267,13 @@ def _free_flight_body(f, coef, st, w, hc, p, t, dt):
     for i in range(3):
         basset[i] = 0.0
     if with_basset:
-        if st.hist_meta[p, META_COUNT] == 0:
-            # (re)start the memory: release or the step after a bed impact
+        if st.hist_meta[p, META_COUNT] <= 0:
+            # release, or the step after an impact: the slip step kept, or a restart (history.py)
             slip = w.slip[p]
             for i in range(3):
                 slip[i] = vel[i] - uf[i]
-                i_hist[i] = 0.0
-            history_reset(slip, st.hist_slip[p], st.hist_meta[p], st.hist_tail[p])
+            history_start_step(slip, st.hist_slip[p], st.hist_meta[p], st.hist_tail[p], i_hist, dt,
+                               hc.keep_impacts, hc.tail_time, hc.tail_weight)
         add_basset_acceleration(coef[BASSET_PREFACTOR], i_hist, basset)
     _rhs(coef, x0, basset, uf, grad, dudt, vort, uf_top, uf_bot, acc, dspin, k[0])
     for stage in range(1, 4):
@@ -299,6 +299,7 @@ def _free_flight_body(f, coef, st, w, hc, p, t, dt):
         history_end_step(
             vel, uf, i_hist, coef[BASSET_PREFACTOR], dt, st.hist_slip[p], st.hist_meta[p],
             st.hist_tail[p], hc.window_weights, hc.tail_weight, hc.tail_decay, hc.tail_c_old, hc.tail_c_new, i_hist,
+            hc.tail_time,
         )
 
 
@@ -402,7 +403,7 @@ def _bed_impact(st, w, p, t, dt, y_old, y_new, bed, seed):
     st.jump_x0[p] = x_hit
     st.jump_ymax[p] = st.pos[p, 1]
     st.fresh[p] = 0  # moved: the fluid must be sampled again
-    st.hist_meta[p, META_COUNT] = 0  # the history restarts at the next step
+    history_mark_impact(st.hist_meta[p])  # the next step takes the slip step (history.py)
 
 
 @njit(cache=True, parallel=True, error_model="numpy")

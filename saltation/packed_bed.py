@@ -51,7 +51,7 @@ from numba import njit
 
 from .bed import NO_IMPACT, rebound
 from .cells import allocate_cells, build_cells, make_grid, min_image
-from .history import META_COUNT
+from .history import history_mark_impact
 from .jumps import BED_MIN_JUMP_DURATION, BED_MIN_JUMP_HEIGHT, close_jump
 
 RADIUS = 0.5  # grain radius (d)
@@ -262,7 +262,7 @@ def packed_bed_check_particle(st, w, p, t, dt, step, coef_bed, pb, last_contact)
                 end_jump(st, p, xh - st.jump_x0[p], st.jump_ymax[p] - RADIUS, t_hit, coef_bed)
             st.jump_t0[p] = t_hit
             st.jump_x0[p] = xh
-        st.hist_meta[p, META_COUNT] = 0  # the Basset history restarts (history.py)
+        history_mark_impact(st.hist_meta[p])  # the next step takes the slip step (history.py)
         pos[0] = xh + tau * vel[0]
         pos[1] = yh + tau * vel[1]
         pos[2] = zh + tau * vel[2]

@@ -139,7 +139,7 @@ class ClusterSimulation:
         self.last_contact = np.full(self.n, -2, np.int64)
         self.bed_s = 0.0
         self.n_window = f.basset_window
-        self.hist_coef = history.make_history_coefficients(self.dt, self.n_window)
+        self.hist_coef = history.make_history_coefficients(self.dt, self.n_window, impacts=f.basset_impacts)
         self.top_d = float(flow.y[-1]) / self.re_star
         self.classes, self.axes, self.composites = draw_grains(case, self.n)
         self.class_id = np.array([CLASS_IDS[c] for c in self.classes], dtype=np.int8)

@@ -59,6 +59,8 @@ class RunInterrupted(KeyboardInterrupt):
 # signal came, so a resumed run calls the kernel with the same (t0, n_steps) chunks and
 # collects jumps in the same order as an uninterrupted one: bit for bit the same run.
 CHECKPOINT = CHECKPOINT_NAME  # "checkpoint.npz" (run_directory.py)
+# 3: the Basset history keeps slip steps (history.N_JUMPS slots in hist_meta, hist_tail)
+CHECKPOINT_FORMAT = 3
 PARTS = ".parts"  # checkpointable Parquet parts, merged into jumps/tracks.parquet at the end
 CHUNK_STEPS = 200  # longest stretch between two chunk ends (how soon a signal is honoured)
 # besides every output.checkpoint_every s of wall time: a checkpoint each time the run has
@@ -183,7 +185,7 @@ class Simulation:
         )
         self.bed = run_bed_parameters(case, self.coef, self.dt)
         self.n_window = f.basset_window
-        self.hist_coef = history.make_history_coefficients(self.dt, self.n_window)
+        self.hist_coef = history.make_history_coefficients(self.dt, self.n_window, impacts=f.basset_impacts)
         self.top_d = float(flow.y[-1]) / self.re_star
         # contacts and bed (stepping.py: free flight → grain contacts → bed each step)
         self.stepper = Stepper(case, self.n, self.domain_d, self.top_d, self.coef, self.bed, case.run.seed,
@@ -422,7 +424,7 @@ class Simulation:
         if var is not None:
             arrays.update({f"variance.{k}": v for k, v in var.state_arrays().items()})
         meta = {
-            "format": 2,
+            "format": CHECKPOINT_FORMAT,
             "step": int(step),
             "n_particles": self.n,
             "case": _case_keys(self.case),
@@ -456,8 +458,9 @@ class Simulation:
             with np.load(path) as z:
                 data = {k: z[k] for k in z.files}
             meta = json.loads(bytes(data.pop("meta")).decode())
-            if meta.get("format") != 2:
-                raise ValueError(f"format {meta.get('format')!r}, this version reads format 2")
+            if meta.get("format") != CHECKPOINT_FORMAT:
+                raise ValueError(f"format {meta.get('format')!r} from another saltation version, this version reads "
+                                 f"format {CHECKPOINT_FORMAT}")
         except Exception as exc:  # truncated, corrupt or from another version
             raise SimulationError(
                 f"cannot resume: the checkpoint {path} is damaged or unreadable ({type(exc).__name__}: {exc}); "

@@ -113,7 +113,7 @@ def test_prefactor_matches_spec_forms():
 def test_memory_per_particle():
     s = H.allocate_history_state(10, 100)
     per_particle = sum(a.nbytes for a in s) / 10
-    assert per_particle == H.history_state_bytes(100) == 24 * 100 + 304
+    assert per_particle == H.history_state_bytes(100) == 24 * 100 + 304 + 32 * H.N_JUMPS
 
 
 # ------------------------------------------------------------------ exactness
@@ -297,7 +297,7 @@ def rk4_with_history(A, b, c, T, n, n_window, ramp, fluid=None, full=False):
         u = u + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
         H.history_end_step(u, still, i_start, c, dt, sh, me, ta, co.window_weights,
                            co.tail_weight, co.tail_decay, co.tail_c_old, co.tail_c_new,
-                           i_carry)
+                           i_carry, co.tail_time)
     return u if full else u[0]
 
 
@@ -353,3 +353,127 @@ def test_rk4_with_tail_close_to_exact():
     exact = exact_step_response(A, b, c, T)
     for n in (200, 400):
         assert rk4_with_history(A, b, c, T, n, n // 20, False) == pytest.approx(exact, abs=5e-4)
+
+
+# ---------------------------------------------------------------- slip steps kept through impacts
+P_PROBE = 1e-7
+
+
+def _drive_prescribed_slip(slip_of_t, steps, dt, n_steps, n_window=10, impacts="keep"):
+    """Production history kernels fed a prescribed slip u_r(t) (a vanishing prefactor: the
+    grain's velocity is the slip itself, uf = 0), with impulsive steps at the starts of the
+    given step indices (marked as impacts). Returns per step: t_{n+1}, the history impulse
+    ∫ I dt over the step that the force applies (held I_n in the stages, the trapezoidal
+    end-of-step closure, the exact slip-step part), and the full I(t_{n+1}) (carried I +
+    the kept steps' Δ/√lag)."""
+    co = H.make_history_coefficients(dt, n_window, impacts=impacts)
+    s = H.allocate_history_state(1, n_window)
+    sh, me, ta = s.slip_hist[0], s.meta[0], s.tail[0]
+    i_hist = np.zeros(3)
+    out = []
+    still = np.zeros(3)
+    for n in range(n_steps):
+        t = n * dt
+        if n in steps:
+            H.history_mark_impact(me)
+        # the impact comes after a step's end: the slip at a step's start is post-impact,
+        # the sample that closes the step before it pre-impact
+        H.history_start_step(slip_of_t(t, True).copy(), sh, me, ta, i_hist, dt, co.keep_impacts, co.tail_time,
+                             co.tail_weight)
+        i_start = i_hist.copy()
+        u_star = slip_of_t(t + dt, False).copy()
+        u = u_star.copy()
+        # a vanishing prefactor P: the end-of-step velocity change is -P × (its part of the
+        # impulse); the stages held -P I_n over Δt
+        H.history_end_step(u, still, i_hist, P_PROBE, dt, sh, me, ta, co.window_weights, co.tail_weight,
+                           co.tail_decay, co.tail_c_old, co.tail_c_new, i_hist, co.tail_time)
+        impulse = dt * i_start + (u_star - u) / P_PROBE
+        full = i_hist.copy()
+        for j in range(H.N_JUMPS):
+            a = me[H.META_JUMPS + j]
+            if a > 0:
+                full += ta[H.N_MODES + j] / np.sqrt(a * dt)
+        out.append((t + dt, impulse, full))
+    return out
+
+
+def test_a_step_in_slip_enters_the_history_as_delta_over_sqrt_lag():
+    """u_r = a t plus a step Δ at t_c: I = 2a√t + Δ/√(t − t_c) exactly; the history
+    impulse ∫ I dt = (4/3) a t^{3/2} + 2Δ√(t − t_c). The step alone is exact while it is
+    in the window (10 steps), then carries the exponential tail's kernel error (the tail
+    is in units of the window, so that error does not fall with Δt)."""
+    delta = np.array([-1.2, 0.8, 0.3])
+    for dt in (0.02, 0.01):
+        n_c = int(round(0.5 / dt))
+        t_c = n_c * dt
+
+        def step_only(t, post):
+            return delta if t > t_c - (1e-12 if post else -1e-12) else 0.0 * delta
+
+        rows = _drive_prescribed_slip(step_only, {n_c}, dt, int(round(3.0 / dt)))
+        ts = np.array([r[0] for r in rows])
+        cum = np.cumsum([r[1] for r in rows], axis=0)
+        exact = 2.0 * np.outer(np.sqrt(np.clip(ts - t_c, 0, None)), delta)
+        in_window = ts <= t_c + 10 * dt + 1e-12
+        np.testing.assert_allclose(cum[in_window], exact[in_window], atol=1e-6 * np.abs(delta).max(), rtol=0)  # probe round-off
+        assert np.max(np.abs(cum - exact)) < 1e-3 * np.abs(exact).max()
+        for t_check in (t_c + 3 * dt, t_c + 2.0):  # I itself, in the window and long after
+            k = int(round(t_check / dt)) - 1
+            np.testing.assert_allclose(rows[k][2], delta / np.sqrt(ts[k] - t_c), rtol=3e-3)
+    # with a smooth part too: both parts together (the smooth part second order after its
+    # finite-acceleration start, history.py)
+    a = np.array([0.3, -0.1, 0.05])
+    dt, n_c = 0.01, 50
+    t_c = n_c * dt
+    rows = _drive_prescribed_slip(
+        lambda t, post: a * t + (delta if t > t_c - (1e-12 if post else -1e-12) else 0.0), {n_c}, dt, 300)
+    ts = np.array([r[0] for r in rows])
+    cum = np.cumsum([r[1] for r in rows], axis=0)
+    exact = (4.0 / 3.0) * np.outer(ts**1.5, a) + 2.0 * np.outer(np.sqrt(np.clip(ts - t_c, 0, None)), delta)
+    assert np.max(np.abs(cum - exact)) < 2e-3
+
+
+def test_restart_option_drops_the_step_and_the_memory():
+    a, delta = np.array([0.3, 0.0, 0.0]), np.array([-1.0, 0.0, 0.0])
+    dt, n_c = 0.01, 50
+
+    def slip(t, post):
+        return a * t + (delta if t > n_c * dt - (1e-12 if post else -1e-12) else 0.0)
+
+    keep = _drive_prescribed_slip(slip, {n_c}, dt, 120, impacts="keep")
+    restart = _drive_prescribed_slip(slip, {n_c}, dt, 120, impacts="restart")
+    k = 80  # t = 0.81, 30 steps after the impact
+    t = keep[k][0]
+    assert restart[k][2][0] == pytest.approx(2 * a[0] * np.sqrt(t - n_c * dt), rel=0.02)  # memory restarted
+    assert keep[k][2][0] == pytest.approx(2 * a[0] * np.sqrt(t) + delta[0] / np.sqrt(t - n_c * dt), rel=0.02)
+    with pytest.raises(ValueError, match="impacts must be one of"):
+        H.make_history_coefficients(dt, 10, impacts="forget")
+
+
+def test_a_bounce_sequence_against_an_independent_full_history_quadrature():
+    """Smooth slip (a sine) with four impacts, two of them inside one window: the
+    production state (window + tail + kept steps, bounded memory) against the plain
+    full-history quadrature of the smooth part plus the exact Σ Δ_k/√(t − t_k)."""
+    dt, n_window = 0.01, 10
+    hits = {30: np.array([-0.9, 0.6, 0.1]), 34: np.array([0.5, -0.4, 0.0]), 140: np.array([-0.7, 0.5, 0.2]),
+            290: np.array([1.1, -0.3, -0.2])}
+
+    def smooth(t):
+        return np.array([0.5 * np.sin(2.0 * t), 0.2 * np.cos(3.0 * t), 0.1 * t])
+
+    def slip(t, post):
+        s = smooth(t)
+        for n, d in hits.items():
+            if t > n * dt - (1e-12 if post else -1e-12):
+                s = s + d
+        return s
+
+    rows = _drive_prescribed_slip(slip, set(hits), dt, 400, n_window=n_window)
+    series = np.array([smooth(k * dt) for k in range(401)])
+    for k in (36, 60, 150, 200, 295, 399):
+        t = rows[k][0]
+        ref = H.full_history_integral(series[: k + 2], dt)
+        for n, d in hits.items():
+            if t > n * dt + 1e-12:
+                ref = ref + d / np.sqrt(t - n * dt)
+        np.testing.assert_allclose(rows[k][2], ref, atol=5e-3, rtol=0)
