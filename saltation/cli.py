@@ -420,6 +420,8 @@ def print_validation(res: dict) -> None:
             env_s = "" if env is None else (" IN " if env else " OUT") + f" [{r[f'{q}_env_lo']:.2f}, {r[f'{q}_env_hi']:.2f}]"
             print(f"  {r['flow']:>13} {r['tau_ratio']:4.2f}: {r[f'{q}_mean']:6.2f} ± {r[f'{q}_std']:<5.2f} [{r['count']}]"
                   f"{env_s}  {ratios}")
+    for flow, why in res.get("skipped", {}).items():
+        print(f"\n{flow}: skipped — {why}")
     grows = {r["flow"]: r["grows_with_stage"] for r in rows}
     print("\nH, L and U all grow with tau*/tau*c: " + ", ".join(f"{k} {'yes' if v else 'NO'}" for k, v in grows.items()))
     for key, title in (("sensitivity", "sensitivity"), ("ablation", "force ablation")):

@@ -46,6 +46,8 @@ from typing import Any, Callable, Mapping
 
 import pandas as pd
 
+from flowfields.dataset import SHIPPED_DATASETS
+
 from .config import TABLES, CaseError, load_case
 
 # readable case names: short tags for the usual grid keys
@@ -221,7 +223,8 @@ def load_sweep(source) -> Sweep:
             raise SweepError(f"top-level key {table!r} in a sweep file: allowed are base = \"case.toml\", "
                              f"the case tables ({', '.join(TABLES)}) and [sweep]", None, table)
         keys = dict(keys)
-        if table == "flow" and isinstance(keys.get("dataset"), str) and not Path(keys["dataset"]).is_absolute():
+        if (table == "flow" and isinstance(keys.get("dataset"), str) and not Path(keys["dataset"]).is_absolute()
+                and keys["dataset"] not in SHIPPED_DATASETS):  # a shipped dataset's name stays a name
             keys["dataset"] = os.path.normpath(folder / keys["dataset"])
         base.setdefault(table, {}).update(keys)
     grid: dict[str, list] = {}

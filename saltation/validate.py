@@ -3,9 +3,11 @@
 One configuration for all four stages (d = 0.69 mm quartz, τ*c = 0.032, τ*/τ*c = 1.79,
 1.87, 2.43, 2.67; the cases ``cases/nino_garcia_*.toml``), run over three flows:
 
-* ``rough LES`` — the sand bed inside the LES (the shipped ``sandbed395``, SPEC §3 rough
-  bed; the default, and the cases' own setting);
-* ``smooth LES`` — the smooth-wall LES (``channel395``, the paper's set-up);
+* ``rough LES`` — the sand bed inside the LES (``sandbed395``, SPEC §3 rough bed; made in
+  place by the command ``flowfields.dataset.MAKE_SANDBED``, not shipped: skipped with that
+  command printed when it is not there);
+* ``smooth LES`` — the smooth-wall LES (``channel395``, the paper's set-up, shipped; the
+  cases' own setting);
 * ``rough log law`` — the analytic rough log law u⁺ = 2.5 ln(30 y/k_s), k_s = 2.5 d.
 
 The mean jump height H/d, length L/d and grain velocity U/u* (mean ± std, jumps counted)
@@ -146,8 +148,13 @@ def run_validation(out, data=None, duration_scale=1.0, ablation=True, sensitivit
     if unknown:
         raise ValueError(f"unknown flow(s) {unknown}; choose from {list(FLOWS)}")
     experiments = read_experiments(data) if data else None
-    rows, ref_rows = [], []
+    rows, refs_by_stage, skipped = [], {}, {}
     for flow in flows:
+        missing = _missing_dataset(FLOWS[flow])
+        if missing:
+            skipped[flow] = missing
+            print(f"{flow:>14}: skipped, {missing}", flush=True)
+            continue
         for ratio in CASES:
             tag = f"{flow.replace(' ', '_')}/{CASES[ratio].removesuffix('.toml')}"
             res, case = _run_case(ratio, out / "runs" / tag, FLOWS[flow], duration_scale, progress, threads)
@@ -156,16 +163,17 @@ def run_validation(out, data=None, duration_scale=1.0, ablation=True, sensitivit
                    "re_star": case.shear_reynolds, **_stats(res)}
             row.update(_compare(row, refs))
             rows.append(row)
-            if flow == flows[0]:
-                for name, r in refs.iterrows():
-                    ref_rows.append({"tau_ratio": ratio, "regression": name,
-                                     **{q: r[regressions.COLUMNS[q]] for q in QUANTITIES}, "notes": r["notes"]})
+            refs_by_stage[ratio] = refs  # the grain and the stage, not the flow, set them
             print(f"{flow:>14} τ*/τ*c = {ratio}: {row['count']} jumps, H = {row['H_mean']:.2f} d, "
                   f"L = {row['L_mean']:.2f} d, U = {row['U_mean']:.2f} u*", flush=True)
+    if not rows:
+        raise ValueError("no flow could be run: " + "; ".join(f"{k}: {v}" for k, v in skipped.items()))
     table = pd.DataFrame(rows)
-    refs_table = pd.DataFrame(ref_rows)
+    refs_table = pd.DataFrame([{"tau_ratio": ratio, "regression": name,
+                                **{q: r[regressions.COLUMNS[q]] for q in QUANTITIES}, "notes": r["notes"]}
+                               for ratio, refs in refs_by_stage.items() for name, r in refs.iterrows()])
     table["grows_with_stage"] = False
-    for flow in flows:
+    for flow in table["flow"].unique():
         sel = table["flow"] == flow
         t = table[sel].sort_values("tau_ratio")
         grows = all(bool(np.all(np.diff(t[f"{q}_mean"].to_numpy()) > 0)) for q in QUANTITIES)
@@ -173,7 +181,8 @@ def run_validation(out, data=None, duration_scale=1.0, ablation=True, sensitivit
     table.to_csv(out / "validation.csv", index=False, float_format="%.4g")
     refs_table.to_csv(out / "references.csv", index=False, float_format="%.4g")
     _figure(table, refs_table, experiments, out / "validation.png")
-    result = {"validation": table.to_dict(orient="records"), "references": refs_table.to_dict(orient="records")}
+    result = {"validation": table.to_dict(orient="records"), "references": refs_table.to_dict(orient="records"),
+              "skipped": skipped}
     if experiments is not None:
         result["experiments"] = experiments.to_dict(orient="records")
     if sensitivity:
@@ -200,9 +209,24 @@ def _variants_table(out, folder, variants, ratio, duration_scale, progress, thre
     return df
 
 
+def _missing_dataset(overrides) -> str | None:
+    """Why a flow's LES dataset cannot be opened (None when it can)."""
+    if overrides.get("flow.source") != "les":
+        return None
+    from flowfields.dataset import DatasetError, open_dataset
+
+    try:
+        open_dataset(overrides.get("flow.dataset"))
+    except DatasetError as exc:
+        return str(exc)
+    return None
+
+
 def run_sensitivity(out, ratio=1.79, duration_scale=1.0, progress=True, threads=0) -> pd.DataFrame:
-    """H, L, U at one stage for each SENSITIVITY row; % change against the defaults."""
-    df = _variants_table(out, "sensitivity", SENSITIVITY, ratio, duration_scale, progress, threads)
+    """H, L, U at one stage for each SENSITIVITY row (rows whose dataset is not there are
+    left out); % change against the defaults."""
+    variants = [(label, over) for label, over in SENSITIVITY if not _missing_dataset(over)]
+    df = _variants_table(out, "sensitivity", variants, ratio, duration_scale, progress, threads)
     df.insert(0, "tau_ratio", ratio)
     return df
 

@@ -246,3 +246,13 @@ def test_a_diverged_solver_log_is_found_with_its_line(tmp_path):
     assert of.diverged_line(log)[0] == 2
     log.write_text("Time = 1\nCourant Number mean: 0.1 max: 0.4\n")
     assert of.diverged_line(log) is None
+
+
+def test_a_sweep_file_keeps_a_shipped_dataset_name(tmp_path):
+    from saltation.sweep import load_sweep
+
+    f = tmp_path / "s.toml"
+    f.write_text('[particle]\ndiameter = 0.69e-3\n[flow]\nsource = "les"\ndataset = "channel395"\n'
+                 '[run]\nn_particles = 4\nduration = 0.01\n[sweep]\ntau_ratio = [1.79, 2.43]\n')
+    sw = load_sweep(f)
+    assert all(c.tables["flow"]["dataset"] == "channel395" for c in sw.cases)

@@ -23,10 +23,10 @@ def test_compare_gives_a_ratio_per_regression_and_the_widened_envelope():
     assert validate._compare(row, refs)["U_in_envelope"]
 
 
-def test_every_case_runs_over_the_rough_bed_and_the_flows_are_known():
+def test_every_case_and_flow_is_consistent_with_its_references():
     for ratio, name in validate.CASES.items():
         case = load_case(validate.cases_dir() / name)
-        assert case.flow.dataset == "sandbed395" and case.flow.bed == "rough"
+        assert case.flow.source == "les"
         assert case.tau_ratio == pytest.approx(ratio)
         refs = validate.references(case)
         assert {"van Rijn 1984", "Fernandez Luque & van Beek 1976"} <= set(refs.index)
@@ -50,3 +50,13 @@ def test_validation_over_the_log_law_writes_its_tables(tmp_path):
     assert len(refs) == 4 * len(regressions.REGRESSIONS)
     assert (tmp_path / "validation.png").stat().st_size > 0
     assert not math.isnan(res["validation"][0]["U / Fernandez Luque & van Beek 1976"])
+
+
+def test_a_flow_whose_dataset_is_not_there_is_skipped_with_the_command_that_makes_it(monkeypatch):
+    import flowfields.dataset as fd
+
+    monkeypatch.setitem(fd.SHIPPED_DATASETS, "sandbed395", fd.SHIPPED_DATASET.parent / "no_such_dataset")
+    why = validate._missing_dataset(validate.FLOWS["rough LES"])
+    assert why and "saltation flow generate" in why and "--bed porous" in why
+    assert validate._missing_dataset(validate.FLOWS["smooth LES"]) is None
+    assert validate._missing_dataset(validate.FLOWS["rough log law"]) is None
