@@ -6,7 +6,7 @@ import math
 import numba
 import numpy as np
 import pytest
-from hypothesis import assume, given, settings
+from hypothesis import assume, example, given, settings
 from hypothesis import strategies as st
 
 from saltation import contacts as C
@@ -246,6 +246,8 @@ vectors = st.lists(st.floats(-10.0, 10.0), min_size=3, max_size=3)
 @settings(max_examples=400, deadline=None)
 @given(vi=vectors, vj=vectors, wi=vectors, wj=vectors, n=unit_vectors,
        restitution=st.floats(0.0, 1.0), friction=st.floats(0.0, 3.0))
+@example(vi=[0.0, 0.0, 0.0], vj=[0.0, 0.0, 0.0], wi=[0.0, 0.0, 0.0], wj=[0.0, 0.0, 1.0], n=(1.0, 1.0, 0.0),
+         restitution=0.0, friction=0.0)  # un = -1e-17 by numpy's cross product, 0 in the kernel
 def test_hard_sphere_impulse_conserves_momentum_and_never_creates_energy(vi, vj, wi, wj, n, restitution, friction):
     model = C.make_contact_model(kn=1.0, restitution=1.0, friction=0.0)  # m = 1, I = 0.1, d = 1
     n = np.array(n) / np.linalg.norm(n)
@@ -260,8 +262,9 @@ def test_hard_sphere_impulse_conserves_momentum_and_never_creates_energy(vi, vj,
     l0 = angular_momentum(centres, vel, spin, model, np.zeros(3))
     e0 = energy(vel, spin, model)
     applied = C.binary_impulse(vel[0], vel[1], spin[0], spin[1], n, restitution, friction, 1.0)
-    assert applied == (un < 0.0)
     scale = 1e-12 * (1.0 + np.abs(vel).max() + np.abs(spin).max())
+    if abs(un) > scale:  # a grazing pair with un at round-off (-1e-17) may go either way
+        assert applied == (un < 0.0)
     np.testing.assert_allclose(vel.sum(axis=0), p0, rtol=0, atol=scale)
     np.testing.assert_allclose(angular_momentum(centres, vel, spin, model, np.zeros(3)), l0, rtol=0, atol=scale)
     assert energy(vel, spin, model) <= e0 * (1.0 + 1e-12) + 1e-12
