@@ -257,7 +257,7 @@ def write_case(p: ChannelParams, case: Path, commands: list) -> dict:
                                        ny=p.ny, ny_bed=p.ny_bed, nz=p.nz, expansion=p.expansion)
         of.write_bed_topo_set(case, p.bed_layers(), lx=p.lx, lz=p.lz, h=p.h, b=p.bed_thickness,
                               d=p.grain_diameter)
-        of.write_rough_fv_options(case, p.rough_ubar, p.bed_layers())
+        of.write_fv_options(case, p.rough_ubar, p.bed_layers())
         of.write_control_dict(case, end_time=p.spinup_time, write_interval=p.spinup_time,
                               delta_t=_initial_delta_t(p), max_courant=p.max_courant,
                               max_delta_t=_max_delta_t(p), monitor_bulk=True)
@@ -381,7 +381,7 @@ def _spin_up_to_target(p: ChannelParams, case: Path, commands: list) -> list[dic
         # several phases; what it reaches is measured and recorded in the end)
         factor = min(2.0, max(0.5, p.re_tau / re_meas)) if re_meas > 0 else 0.5
         ubar *= factor
-        of.write_rough_fv_options(case, ubar, p.bed_layers())
+        of.write_fv_options(case, ubar, p.bed_layers())
         corrections.append({"phase": k, "t_end_s": t_end, "re_tau_measured": round(re_meas, 2),
                             "factor": round(factor, 5), "ubar_m_s": ubar})
         _say(f"spin-up phase {k}: Re_tau = {re_meas:.1f} from the driving gradient; flow rate scaled by {factor:.4f}")

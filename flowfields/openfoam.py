@@ -488,9 +488,12 @@ LES
     return _write(case / "constant" / "turbulenceProperties", text)
 
 
-def write_fv_options(case: Path, ubar: float) -> Path:
+def write_fv_options(case: Path, ubar: float, bed_layers: Sequence[dict] = ()) -> Path:
     """meanVelocityForce: a uniform streamwise pressure gradient, re-adjusted each step,
-    that holds the bulk velocity at `ubar` (constant-flow-rate channel)."""
+    that holds the bulk velocity at `ubar` (constant-flow-rate channel); its gradient G,
+    printed each step, gives u*² = ⟨G⟩ × depth above the wall or bed top (the momentum
+    balance there, exact on average since the flow rate is fixed). With `bed_layers`
+    (a rough bed, flowfields.rough_bed): one Ergun DarcyForchheimer zone per bed cell layer."""
     text = foam_header("dictionary", "fvOptions", "constant") + f"""\
 momentumSource
 {{
@@ -500,7 +503,7 @@ momentumSource
     Ubar            ({_fmt(ubar)} 0 0);
     relaxation      1;
 }}
-"""
+""" + "".join(_porosity_zone(k, lay) for k, lay in enumerate(bed_layers))
     return _write(case / "constant" / "fvOptions", text)
 
 
@@ -992,26 +995,12 @@ def write_bed_topo_set(case: Path, layers: Sequence[dict], *, lx: float, lz: flo
     return _write(case / "system" / "topoSetDict", text)
 
 
-def write_rough_fv_options(case: Path, ubar: float, layers: Sequence[dict]) -> Path:
-    """meanVelocityForce holding the whole box's bulk velocity at `ubar` (its gradient G,
-    printed each step, gives u*² = ⟨G⟩ × depth above the bed top: the momentum balance
-    there, exact on average since the flow rate is fixed) and one Ergun DarcyForchheimer
-    zone per bed cell layer."""
-    parts = [f"""\
-momentumSource
-{{
-    type            meanVelocityForce;
-    selectionMode   all;
-    fields          (U);
-    Ubar            ({_fmt(ubar)} 0 0);
-    relaxation      1;
-}}
-"""]
-    for k, lay in enumerate(layers):
-        dc, fc = lay["darcy_d"], lay["forchheimer_f"]
-        if dc <= 0 and fc <= 0:
-            continue
-        parts.append(f"""
+def _porosity_zone(k: int, lay: dict) -> str:
+    """One bed cell layer's Ergun drag (DarcyForchheimer on cellZone bed<k>); '' if none."""
+    dc, fc = lay["darcy_d"], lay["forchheimer_f"]
+    if dc <= 0 and fc <= 0:
+        return ""
+    return f"""
 bedPorosity{k}
 {{
     type            explicitPorositySource;
@@ -1029,9 +1018,7 @@ bedPorosity{k}
         }}
     }}
 }}
-""")
-    text = foam_header("dictionary", "fvOptions", "constant") + "".join(parts)
-    return _write(case / "constant" / "fvOptions", text)
+"""
 
 
 def bulk_velocity_history(case: Path) -> np.ndarray:

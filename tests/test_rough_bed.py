@@ -75,7 +75,7 @@ def test_rough_case_writes_bed_blocks_zones_and_ergun_drag(tmp_path):
     of.write_rough_block_mesh_dict(tmp_path, lx=p.lx, lz=p.lz, h=p.h, b=p.bed_thickness, nx=p.nx, ny=p.ny,
                                    ny_bed=p.ny_bed, nz=p.nz, expansion=p.expansion)
     of.write_bed_topo_set(tmp_path, p.bed_layers(), lx=p.lx, lz=p.lz, h=p.h, b=p.bed_thickness, d=p.grain_diameter)
-    of.write_rough_fv_options(tmp_path, p.rough_ubar, p.bed_layers())
+    of.write_fv_options(tmp_path, p.rough_ubar, p.bed_layers())
     mesh = (tmp_path / "system" / "blockMeshDict").read_text()
     assert mesh.count("hex (") == 4
     assert f"({p.nx} {p.ny_bed} {p.nz}) simpleGrading (1 1 1)" in mesh
