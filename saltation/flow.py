@@ -9,6 +9,8 @@ from __future__ import annotations
 
 from numba import njit
 
+from flowfields.dataset import DatasetError
+
 from flowfields.sampler import (ABOVE_TOP, BELOW_WALL, gather_cell, locate_xzt, sample_column, sample_point,
                                 velocity_in_cell, vorticity_from_gradient, wall_normal)
 
@@ -86,7 +88,7 @@ BED_TOLERANCE = 0.20
 BED_MODES = ("auto", "smooth", "rough")
 
 
-class BedMismatch(ValueError):
+class BedMismatch(DatasetError):
     """The flow dataset's bed does not fit the run (the message says which one to make)."""
 
 

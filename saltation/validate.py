@@ -167,7 +167,9 @@ def run_validation(out, data=None, duration_scale=1.0, ablation=True, sensitivit
             print(f"{flow:>14} τ*/τ*c = {ratio}: {row['count']} jumps, H = {row['H_mean']:.2f} d, "
                   f"L = {row['L_mean']:.2f} d, U = {row['U_mean']:.2f} u*", flush=True)
     if not rows:
-        raise ValueError("no flow could be run: " + "; ".join(f"{k}: {v}" for k, v in skipped.items()))
+        from flowfields.dataset import DatasetError
+
+        raise DatasetError("no flow could be run: " + "; ".join(f"{k}: {v}" for k, v in skipped.items()))
     table = pd.DataFrame(rows)
     refs_table = pd.DataFrame([{"tau_ratio": ratio, "regression": name,
                                 **{q: r[regressions.COLUMNS[q]] for q in QUANTITIES}, "notes": r["notes"]}

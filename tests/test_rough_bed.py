@@ -4,6 +4,7 @@ layer, and the refusal of runs whose grains do not fit the dataset's bed."""
 import json
 import math
 import shutil
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -256,3 +257,13 @@ def test_a_sweep_file_keeps_a_shipped_dataset_name(tmp_path):
                  '[run]\nn_particles = 4\nduration = 0.01\n[sweep]\ntau_ratio = [1.79, 2.43]\n')
     sw = load_sweep(f)
     assert all(c.tables["flow"]["dataset"] == "channel395" for c in sw.cases)
+
+
+def test_the_cli_refuses_a_bed_mismatch_in_one_line(tmp_path, capsys):
+    from saltation.cli import main
+
+    case = str(Path(__file__).resolve().parent.parent / "cases" / "default.toml")
+    assert main(["run", case, "--set", "flow.bed=rough", "--out", str(tmp_path / "r"), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and err.startswith("saltation: error: flow.bed = \"rough\"")
+    assert "saltation flow generate --bed porous" in err
