@@ -131,7 +131,18 @@ def _flow_generate(args) -> int:
 
     _out_dir(args.out)
     _out_dir(args.work_dir, "--work-dir")
-    params = ChannelParams(
+    try:
+        params = _channel_params(args, ChannelParams)
+    except ValueError as exc:  # a parameter out of range: named, before any OpenFOAM work
+        raise UsageError(f"flow generate: {exc}") from None
+    cmd = "saltation " + " ".join(shlex.quote(a) for a in sys.argv[1:])
+    path = generate(params, args.out, work_dir=args.work_dir, command_line=cmd, y_max_plus=args.y_max_plus, dtype=args.dtype)
+    print(f"wrote dataset {path}")
+    return 0
+
+
+def _channel_params(args, ChannelParams):
+    return ChannelParams(
         re_tau=args.re_tau,
         lx_h=args.lx,
         lz_h=args.lz,
@@ -150,10 +161,6 @@ def _flow_generate(args) -> int:
         bed_porosity=args.bed_porosity,
         ny_bed=args.ny_bed,
     )
-    cmd = "saltation " + " ".join(shlex.quote(a) for a in sys.argv[1:])
-    path = generate(params, args.out, work_dir=args.work_dir, command_line=cmd, y_max_plus=args.y_max_plus, dtype=args.dtype)
-    print(f"wrote dataset {path}")
-    return 0
 
 
 def _set_options(items) -> tuple[dict, dict]:
@@ -574,6 +581,7 @@ def main(argv=None) -> int:
         args = build_parser().parse_args(argv)
         args._argv = argv
         from flowfields.dataset import DatasetError
+        from flowfields.openfoam import OpenFOAMError
 
         from .analysis.variance import AnalysisError
         from .config import CaseError
@@ -585,7 +593,7 @@ def main(argv=None) -> int:
         try:
             return int(args.func(args) or 0)
         except (DatasetError, CaseError, SimulationError, AnalysisError, FileNotFoundError, UsageError,
-                OutputDirectoryError, RunDirectoryError, MissingExtraError) as exc:
+                OutputDirectoryError, RunDirectoryError, MissingExtraError, OpenFOAMError) as exc:
             print(f"saltation: error: {exc}", file=sys.stderr)
             return 2
     except KeyboardInterrupt:  # Ctrl-C at any moment: one line, no traceback (the run loop's own

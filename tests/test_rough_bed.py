@@ -267,3 +267,13 @@ def test_the_cli_refuses_a_bed_mismatch_in_one_line(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "Traceback" not in err and err.startswith("saltation: error: flow.bed = \"rough\"")
     assert "saltation flow generate --bed porous" in err
+
+
+def test_the_cli_names_a_bad_generate_parameter_in_one_line(tmp_path, capsys):
+    from saltation.cli import main
+
+    assert main(["flow", "generate", "--out", str(tmp_path / "d"), "--work-dir", str(tmp_path / "c"), "--bed", "porous",
+                 "--bed-porosity", "0.9"]) == 2
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and "porosity must lie between" in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "c" / "system").exists()  # refused before any OpenFOAM work
