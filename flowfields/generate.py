@@ -143,12 +143,6 @@ class ChannelParams:
         return self.bed_depth_d * self.grain_diameter if self.bed == "porous" else 0.0
 
     @property
-    def driving_gradient(self) -> float:
-        """Nominal driving gradient G = u_τ²/h (m/s²): the momentum balance of the fluid
-        above the bed top, in equilibrium."""
-        return self.u_tau**2 / self.h
-
-    @property
     def rough_ubar(self) -> float:
         """Bulk velocity of the whole rough box (bed layers at rest included), m/s."""
         return self.rough_ubar_estimate_plus * self.u_tau * self.h / (self.h + self.bed_thickness)
@@ -260,7 +254,7 @@ def write_case(p: ChannelParams, case: Path, commands: list) -> dict:
         of.write_fv_options(case, p.rough_ubar, p.bed_layers())
         of.write_control_dict(case, end_time=p.spinup_time, write_interval=p.spinup_time,
                               delta_t=_initial_delta_t(p), max_courant=p.max_courant,
-                              max_delta_t=_max_delta_t(p), monitor_bulk=True)
+                              max_delta_t=_max_delta_t(p))
     if p.initial == "map":
         source = of.prepare_tutorial_source(case / "channel395_source", commands)
         U = of.map_tutorial_velocity(case, source, lx=p.lx, lz=p.lz, h=p.h, nx=p.nx, ny=p.ny,
@@ -311,10 +305,6 @@ def _progress_printer(stage: str, p: ChannelParams, t_begin: float, t_end: float
         if grads is not None:
             u_tau = math.sqrt(max(grads, 0.0) * p.h)  # dp/dx = u_τ²/h in equilibrium
             msg += f", Re_tau(dp/dx, last steps) = {u_tau * p.h / p.nu:5.1f}"
-        if p.bed == "porous":
-            bulk = of.bulk_velocity_history(log.parent)
-            if len(bulk):
-                msg += f", bulk U+ (whole box) = {bulk[-1, 1] / p.u_tau:6.3f}"
         _say(msg)
 
     def re_grads(log: Path):
@@ -366,7 +356,7 @@ def _spin_up_to_target(p: ChannelParams, case: Path, commands: list) -> list[dic
     for k in range(1, ROUGH_SPINUP_PHASES):
         t_end = round_significant(k * p.spinup_time / ROUGH_SPINUP_PHASES)
         of.write_control_dict(case, end_time=t_end, write_interval=t_end - t_prev, delta_t=_initial_delta_t(p),
-                              max_courant=p.max_courant, max_delta_t=_max_delta_t(p), monitor_bulk=True)
+                              max_courant=p.max_courant, max_delta_t=_max_delta_t(p))
         log = of.run_pimple_foam(case, nprocs=p.nprocs, log_name=f"pimpleFoam.spinup{k}", commands=commands,
                                  progress=_progress_printer(f"spin-up ({k}/{ROUGH_SPINUP_PHASES})", p, 0.0,
                                                             p.spinup_time))
@@ -389,7 +379,7 @@ def _spin_up_to_target(p: ChannelParams, case: Path, commands: list) -> list[dic
     # the caller's last phase: one write, at the spin-up end (write times count from the run's start)
     of.write_control_dict(case, end_time=p.spinup_time, write_interval=p.spinup_time - t_prev,
                           delta_t=_initial_delta_t(p), max_courant=p.max_courant,
-                          max_delta_t=_max_delta_t(p), monitor_bulk=True)
+                          max_delta_t=_max_delta_t(p))
     return corrections
 
 
@@ -445,7 +435,7 @@ def run_channel_les(p: ChannelParams, case: Path | str, command_line: str | None
          f"({p.snapshot_interval:.6g} s)")
     of.write_control_dict(case, end_time=p.end_time, write_interval=p.snapshot_interval,
                           delta_t=_initial_delta_t(p), max_courant=p.max_courant,
-                          max_delta_t=_max_delta_t(p), monitor_bulk=p.bed == "porous")
+                          max_delta_t=_max_delta_t(p))
     of.run_pimple_foam(case, nprocs=p.nprocs, log_name="pimpleFoam.sampling", commands=commands,
                        progress=_progress_printer("sampling", p, p.spinup_time, p.end_time))
     walls["sampling"] = round(time.time() - t0, 1)

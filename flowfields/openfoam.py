@@ -294,8 +294,7 @@ def patch_names(tutorial_patch_names: bool = False) -> list[str]:
 
 def write_control_dict(case: Path, *, end_time: float, write_interval: float,
                        delta_t: float, max_courant: float, max_delta_t: float,
-                       write_format: str = "binary", start_from: str = "latestTime",
-                       monitor_bulk: bool = False) -> Path:
+                       write_format: str = "binary", start_from: str = "latestTime") -> Path:
     """pimpleFoam controlDict. The time step adapts to `max_courant`; with
     `adjustableRunTime` OpenFOAM shortens the step to land exactly on every write time,
     so snapshots are equally spaced at `write_interval` after the run's start time."""
@@ -319,30 +318,7 @@ adjustTimeStep  yes;
 maxCo           {_fmt(max_courant)};
 maxDeltaT       {_fmt(max_delta_t)};
 """
-    if monitor_bulk:
-        text += BULK_MONITOR
     return _write(case / "system" / "controlDict", text)
-
-
-# Volume-averaged velocity every 20 steps (postProcessing/bulk/<t0>/volFieldValue.dat):
-# with a fixed driving gradient the bulk velocity is the quantity that settles.
-BULK_MONITOR = """
-functions
-{
-    bulk
-    {
-        type            volFieldValue;
-        libs            ("libfieldFunctionObjects.so");
-        writeControl    timeStep;
-        writeInterval   20;
-        log             false;
-        writeFields     false;
-        regionType      all;
-        operation       volAverage;
-        fields          (U);
-    }
-}
-"""
 
 
 def write_fv_schemes(case: Path, convection: str = "linear") -> Path:
@@ -1019,21 +995,3 @@ bedPorosity{k}
     }}
 }}
 """
-
-
-def bulk_velocity_history(case: Path) -> np.ndarray:
-    """(time, volume-averaged U_x) rows from the bulk monitor files, in time order."""
-    rows = []
-    for f in sorted((Path(case) / "postProcessing" / "bulk").glob("*/volFieldValue*.dat")):
-        for line in f.read_text().splitlines():
-            if not line.strip() or line.startswith("#"):
-                continue
-            parts = line.replace("(", " ").replace(")", " ").split()
-            try:
-                rows.append((float(parts[0]), float(parts[1])))
-            except (ValueError, IndexError):
-                continue
-    if not rows:
-        return np.zeros((0, 2))
-    a = np.array(sorted(set(rows)))
-    return a
