@@ -266,7 +266,7 @@ def _figure(table: pd.DataFrame, refs: pd.DataFrame, experiments, path: Path):
         ax.set_xlabel("τ*/τ*c")
         ax.set_ylabel(label)
         ax.grid(alpha=0.3)
-    axes[0].legend(fontsize=6.5)
+        ax.legend(fontsize=6)  # each panel has its own regressions
     fig.suptitle("Single-grain saltation, d = 0.69 mm quartz in water (Niño & García 1998 conditions)")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
