@@ -1,0 +1,131 @@
+"""The bit-for-bit regression set of issue 18: a dozen short runs covering spheres and
+composites × virtual and packed bed × contacts off / soft / hard × Basset on / off ×
+checkpoint-resume. ``fingerprint`` reduces a finished run directory to arrays (every
+column of jumps.parquet and tracks.parquet — the tracks' last frame is the end state —
+and every number of summary.json except wall-clock timings); the reference is
+``reference.npz`` next to this file, written by ``make_reference.py`` before a refactor.
+"""
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+HERE = Path(__file__).resolve().parent
+REFERENCE = HERE / "reference.npz"
+D = 0.69e-3
+
+
+def _case(shape="sphere", bed="virtual", contacts="off", basset=True, source="les", dense=False, threads=1,
+          impacts="keep", seed=5, duration=0.25):
+    run = {"duration": duration, "dt_particle": 0.02, "seed": seed, "threads": threads, "name": "reg"}
+    if dense:  # a small box at the paper's densest concentrations: grains in contact, sub-stepped
+        if shape == "sphere":
+            run.update({"concentration": 0.0394, "domain": [0.008, 0.004, 0.028]})
+        else:  # composite contacts need a box ≥ 7.84 Dn wide (cluster_contacts.py)
+            run.update({"concentration": 0.0207, "domain": [0.012, 0.006, 0.028]})
+    else:
+        run["n_particles"] = 16
+    flow = {"source": source, "tau_ratio": 1.79}
+    return {
+        "particle": {"diameter": D, "shape": shape},
+        "flow": flow,
+        "bed": {"model": bed},
+        "collisions": {"model": contacts},
+        "forces": {"basset": basset, "basset_impacts": impacts},
+        "run": run,
+        "output": {"tracks": True, "tracks_interval": duration, "vtk": False},
+    }
+
+
+# name -> (case dict, resume step or None): a resumed case is interrupted at that step and
+# resumed; its fingerprint must be the uninterrupted run's.
+CASES = {
+    "sphere_virtual_off": (_case(), None),
+    "sphere_virtual_off_nobasset_loglaw": (_case(basset=False, source="loglaw"), None),
+    "sphere_virtual_off_restart": (_case(impacts="restart"), None),
+    "sphere_virtual_soft_dense": (_case(contacts="soft", dense=True), None),
+    "sphere_virtual_hard_dense": (_case(contacts="hard", dense=True), None),
+    "sphere_packed_soft_dense": (_case(bed="packed", contacts="soft", dense=True), None),
+    "sphere_packed_off_nobasset": (_case(bed="packed", basset=False), None),
+    "sphere_virtual_soft_dense_2threads": (_case(contacts="soft", dense=True, threads=2), None),
+    "sphere_packed_soft_dense_resumed": (_case(bed="packed", contacts="soft", dense=True), 300),
+    "mixture_virtual_off": (_case(shape="mixture"), None),
+    "mixture_virtual_off_nobasset": (_case(shape="mixture", basset=False), None),
+    "mixture_virtual_soft_dense": (_case(shape="mixture", contacts="soft", dense=True), None),
+    "mixture_packed_soft_dense": (_case(shape="mixture", bed="packed", contacts="soft", dense=True), None),
+    "rod_packed_off": (_case(shape="rod", bed="packed"), None),
+}
+
+# top-level summary keys that are measured wall times
+_WALL_CLOCK = ("timing", "particle_steps_per_s", "component_sphere_steps_per_s")
+
+
+def _numbers(obj, prefix=""):
+    """Flatten summary.json to {path: float}: its numbers, not its texts, without the
+    wall-clock timings."""
+    out = {}
+    if isinstance(obj, dict):
+        for k, v in obj.items():
+            out.update(_numbers(v, f"{prefix}/{k}"))
+    elif isinstance(obj, (list, tuple)):
+        for i, v in enumerate(obj):
+            out.update(_numbers(v, f"{prefix}/{i}"))
+    elif isinstance(obj, bool) or obj is None:
+        pass
+    elif isinstance(obj, (int, float)):
+        if prefix.split("/")[1] not in _WALL_CLOCK:
+            out[prefix] = float(obj)
+    return out
+
+
+def fingerprint(out: Path) -> dict[str, np.ndarray]:
+    out = Path(out)
+    fp = {}
+    for table in ("jumps", "tracks"):
+        frame = pd.read_parquet(out / f"{table}.parquet")
+        for col in frame.columns:
+            fp[f"{table}/{col}"] = frame[col].to_numpy()
+    summary = _numbers(json.loads((out / "summary.json").read_text()))
+    keys = sorted(summary)
+    fp["summary/keys"] = np.array(keys)
+    fp["summary/values"] = np.array([summary[k] for k in keys])
+    return fp
+
+
+def run_case(name: str, out: Path) -> dict[str, np.ndarray]:
+    """Run one case of the set (interrupting and resuming it where it says) and return its
+    fingerprint."""
+    import pytest
+
+    from saltation.config import load_case
+    from saltation.simulation import RunInterrupted, Simulation, _les_box_m, open_flow, resolve_domain, run
+
+    case, stop = CASES[name]
+    out = Path(out)
+    if stop is not None:
+        c = load_case(case)
+        ds = open_flow(c)
+        c = resolve_domain(c, _les_box_m(ds, c) if c.flow.source == "les" else None)
+        with pytest.raises(RunInterrupted):
+            Simulation(c, ds, out, progress=False, stop_after_steps=stop).run()
+        run(case, out=out, progress=False, resume=True)
+    else:
+        run(case, out=out, progress=False, overwrite=True)
+    return fingerprint(out)
+
+
+def compare(name: str, got: dict, ref: dict) -> list[str]:
+    """What differs between a fingerprint and the reference (empty: identical bits)."""
+    bad = []
+    for k in sorted(set(got) | set(ref)):
+        if k not in got or k not in ref:
+            bad.append(f"{name}: {k} only in {'reference' if k in ref else 'this run'}")
+            continue
+        a, b = got[k], ref[k]
+        if a.shape != b.shape or not np.array_equal(a, b, equal_nan=a.dtype.kind == "f"):
+            bad.append(f"{name}: {k} differs")
+    return bad
