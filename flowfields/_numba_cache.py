@@ -1,19 +1,23 @@
-"""One Numba cache per version of the kernel sources.
+"""A Numba cache that recompiles exactly what a source change touches.
 
-Numba's on-disk cache (``cache=True``) checks only the timestamp of the file that holds
-a kernel. A kernel that inlines or calls kernels from *other* files (the step in
-saltation/stepping.py calls collide.py, packed_bed.py, integrator.py, forces.py, …) is
-then reloaded stale after those files change: wrong machine code, silently. So every
-kernel of both packages is cached under a directory named by a hash of the sources that
-can reach compiled code: the modules that define kernels (``@njit``) and every module of
-the two packages they import, transitively (a global constant read by a kernel is frozen
-into its machine code). An edit to any other module (the command line, the case schema,
-the run loop, the writers, the analysis) keeps the cache. ``NUMBA_CACHE_DIR``, when set,
-is the parent. Must run before any ``@njit(cache=True)`` decorator executes (both
-packages' __init__).
+Numba's on-disk cache (``cache=True``) stamps a kernel with the source of the file that
+defines it, and nothing else. A kernel that calls kernels from *other* files (the step in
+the engine calls the contact phase, the bed, the free flight, the forces, …) has their
+machine code linked into its own, so after a change to one of those files Numba would
+reload it stale: wrong machine code, silently. Here every kernel's stamp is a hash of
+its module *and of every module of the two packages it imports, transitively* (a global
+constant read by a kernel is frozen into its machine code too): a change to a module
+recompiles the kernels of that module and of the modules that import it, and loads the
+rest from the cache. An edit to a module no kernel module imports (the command line, the
+case schema, the run loop, the writers, the analysis) recompiles nothing.
+
+The cache lives in ``$NUMBA_CACHE_DIR/kernels`` (default ``~/.cache/saltation-numba``).
+``use_versioned_cache()`` must run before any ``@njit(cache=True)`` decorator executes
+(both packages' ``__init__`` call it).
 """
 from __future__ import annotations
 
+import functools
 import hashlib
 import os
 import re
@@ -21,6 +25,7 @@ from pathlib import Path
 
 _done = False
 PACKAGES = ("flowfields", "saltation")
+ROOT = Path(__file__).resolve().parents[1]
 _KERNEL = re.compile(r"^\s*@(numba\.)?(njit|jit|vectorize|guvectorize)\b", re.M)
 # in-package imports: "from .x import", "from ..x import", "from . import x, y", "from saltation.x import"
 _FROM = re.compile(r"^\s*from\s+(\.+)([\w.]*)\s+import\s+(\([^)]*\)|[^\n]+)", re.M)
@@ -75,19 +80,77 @@ def kernel_sources(root: Path | None = None) -> list[Path]:
     return sorted(seen)
 
 
+def module_closure(path: Path, root: Path | None = None) -> list[Path]:
+    """``path`` and every module of the two packages it imports, transitively."""
+    root = root or ROOT
+    seen, todo = {path}, [path]
+    while todo:
+        for f in _imports(root, todo.pop()):
+            if f not in seen:
+                seen.add(f)
+                todo.append(f)
+    return sorted(seen)
+
+
+def closure_stamp(path: Path, root: Path | None = None) -> str:
+    """The cache stamp of the kernels defined in ``path``: a hash of its import closure."""
+    root = root or ROOT
+    h = hashlib.sha1()
+    for p in module_closure(path, root):
+        h.update(p.relative_to(root).as_posix().encode())
+        h.update(p.read_bytes())
+    return h.hexdigest()
+
+
+@functools.lru_cache(maxsize=None)
+def _closure_stamp(py_file: str) -> str:
+    return closure_stamp(Path(py_file).resolve())
+
+
+def kernel_version() -> str:
+    """A hash of every kernel module and what they import (names the compile notice's marker)."""
+    h = hashlib.sha1()
+    for p in kernel_sources(ROOT):
+        h.update(p.relative_to(ROOT).as_posix().encode())
+        h.update(p.read_bytes())
+    return h.hexdigest()[:16]
+
+
+def _locator_class():
+    """Numba's locator for $NUMBA_CACHE_DIR, with the stamp of a kernel of our packages
+    replaced by the hash of its module's import closure (module docstring)."""
+    from numba.core import caching
+
+    base = getattr(caching, "UserProvidedCacheLocator", None) or caching._UserProvidedCacheLocator
+
+    class ClosureStampedLocator(base):
+        def get_source_stamp(self):
+            return _closure_stamp(self._py_file)
+
+        @classmethod
+        def from_function(cls, py_func, py_file):
+            try:
+                Path(py_file).resolve().relative_to(ROOT)
+            except ValueError:
+                return None  # not ours: Numba's own locators decide
+            if Path(py_file).resolve().relative_to(ROOT).parts[0] not in PACKAGES:
+                return None
+            return super().from_function(py_func, py_file)
+
+    return caching, ClosureStampedLocator
+
+
 def use_versioned_cache() -> str:
     global _done
     import numba
 
     if _done:
         return numba.config.CACHE_DIR
-    root = Path(__file__).resolve().parents[1]
-    h = hashlib.sha1()
-    for p in kernel_sources(root):
-        h.update(p.relative_to(root).as_posix().encode())
-        h.update(p.read_bytes())
     base = os.environ.get("NUMBA_CACHE_DIR") or os.path.join(
         os.environ.get("XDG_CACHE_HOME") or os.path.join(Path.home(), ".cache"), "saltation-numba")
-    numba.config.CACHE_DIR = os.path.join(base, h.hexdigest()[:16])
+    numba.config.CACHE_DIR = os.path.join(base, "kernels")
+    caching, locator = _locator_class()
+    impl = getattr(caching, "CacheImpl", None) or caching._CacheImpl
+    impl._locator_classes = [locator] + [c for c in impl._locator_classes if c.__name__ != locator.__name__]
     _done = True
     return numba.config.CACHE_DIR

@@ -41,8 +41,10 @@ def test_compile_notice_speaks_once_per_cache_and_quotes_the_wait(tmp_path, monk
     lasts, the measured time after; a warm one (marker written): silence."""
     import numba
 
+    from flowfields._numba_cache import kernel_version
     from saltation import progress
 
+    version = kernel_version()
     monkeypatch.setattr(numba.config, "CACHE_DIR", str(tmp_path / "cache"))
     monkeypatch.setattr(progress, "COMPILE_HEARTBEAT_S", 0.05)
     with progress.compile_notice(True, "spheres"):
@@ -51,10 +53,10 @@ def test_compile_notice_speaks_once_per_cache_and_quotes_the_wait(tmp_path, monk
     assert "compiling the spheres kernels, once per installation" in err
     assert f"~{progress.COMPILE_ESTIMATE_S['spheres']:.0f} s" in err
     assert "still compiling" in err and "kernels compiled in" in err
-    assert (tmp_path / "cache" / "compiled-spheres.json").exists()
+    assert (tmp_path / "cache" / f"compiled-spheres-{version}.json").exists()
     with progress.compile_notice(True, "spheres"):
         pass
     assert capsys.readouterr().err == ""
     with progress.compile_notice(False, "composites"):  # --quiet: nothing, and no marker
         pass
-    assert capsys.readouterr().err == "" and not (tmp_path / "cache" / "compiled-composites.json").exists()
+    assert capsys.readouterr().err == "" and not (tmp_path / "cache" / f"compiled-composites-{version}.json").exists()

@@ -1,0 +1,63 @@
+"""The Numba cache recompiles what a change touches and nothing else
+(flowfields/_numba_cache.py): a kernel's stamp is the hash of its module's import closure."""
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import numba
+
+from flowfields import _numba_cache as nc
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _module(name: str) -> Path:
+    return ROOT / (name.replace(".", "/") + ".py")
+
+
+def test_closure_follows_imports_transitively_and_stops_at_the_packages():
+    stepping = set(nc.module_closure(_module("saltation.stepping")))
+    for dep in ("saltation.integrator", "saltation.forces", "saltation.history", "flowfields.sampler"):
+        assert _module(dep) in stepping, dep  # direct and indirect imports
+    assert _module("saltation.cli") not in stepping
+    assert _module("saltation.config") not in stepping
+    assert all(p.is_relative_to(ROOT) for p in stepping)
+
+
+def test_an_edit_changes_the_stamps_of_the_modules_that_import_it_and_no_others(tmp_path):
+    for pkg in nc.PACKAGES:
+        shutil.copytree(ROOT / pkg, tmp_path / pkg, ignore=shutil.ignore_patterns("data", "__pycache__"))
+    kernels = [p.relative_to(ROOT) for p in nc.kernel_sources(ROOT)]
+    before = {k: nc.closure_stamp(tmp_path / k, tmp_path) for k in kernels}
+    edited = Path("saltation/cluster_contacts.py")  # composites only
+    with open(tmp_path / edited, "a") as f:
+        f.write("\n# an edit\n")
+    after = {k: nc.closure_stamp(tmp_path / k, tmp_path) for k in kernels}
+    changed = {k for k in kernels if before[k] != after[k]}
+    assert edited in changed
+    importers = {k for k in kernels if tmp_path / edited in nc.module_closure(tmp_path / k, tmp_path)}
+    assert changed == importers
+    for sphere_kernel in ("saltation/stepping.py", "saltation/collide.py", "saltation/integrator.py",
+                          "flowfields/sampler.py"):
+        assert Path(sphere_kernel) not in changed  # a sphere run loads everything from the cache
+    # an edit to the command line changes no stamp at all
+    with open(tmp_path / "saltation/cli.py", "a") as f:
+        f.write("\n# an edit\n")
+    assert {k: nc.closure_stamp(tmp_path / k, tmp_path) for k in kernels} == after
+
+
+def test_numba_uses_the_closure_stamp_for_our_kernels():
+    from numba.core import caching
+
+    impl = getattr(caching, "CacheImpl", None) or caching._CacheImpl
+    locator = impl._locator_classes[0]
+    assert locator.__name__ == "ClosureStampedLocator"
+    from saltation import forces
+
+    py_file = forces.__file__
+    loc = locator.from_function(forces.make_coefficients, py_file)
+    assert loc is not None and loc.get_source_stamp() == nc.closure_stamp(Path(py_file))
+    assert loc.get_cache_path().startswith(numba.config.CACHE_DIR)
+    # a function outside the two packages is left to Numba's own locators
+    assert locator.from_function(shutil.copy, shutil.__file__) is None
