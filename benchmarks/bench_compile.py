@@ -39,7 +39,7 @@ print(json.dumps(res.summary["timing"]))
 """
 
 
-EDITS = "saltation/cli.py,saltation/cluster_contacts.py,saltation/forces.py"
+EDITS = "saltation/cli.py,saltation/contacts/composites.py,saltation/physics/forces.py"
 
 
 def copy_sources(dest: Path) -> Path:

@@ -36,6 +36,7 @@ import os
 import re
 import shutil
 import subprocess
+import sys
 import tempfile
 import time
 from pathlib import Path
@@ -43,8 +44,10 @@ from pathlib import Path
 import numba
 import numpy as np
 
-from saltation import contacts as C
-from saltation.lammps_gas import gas_input, write_gas_data
+from saltation.contacts import pairs as C
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "peers"))
+from lammps_gas import gas_input, write_gas_data  # noqa: E402  (tests/peers: a test and benchmark helper)
 
 
 def run_lammps(lmp, workdir, model, dt, steps, skin):

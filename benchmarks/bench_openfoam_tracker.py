@@ -37,7 +37,7 @@ process pinned to one core by running it serially; ours on one Numba thread):
     contacts) ``nSubCycles`` times per step. Ours: ``ours_contacts`` (RK4 free flight,
     then every grain sub-stepped through the contacts with contacts.advance_granular —
     as OpenFOAM sub-steps every grain) and, when the run loop has contacts
-    (``saltation.stepping.Stepper``), ``ours_run_loop`` (sub-steps only the grains that
+    (``saltation.engine.stepping.Stepper``), ``ours_run_loop`` (sub-steps only the grains that
     can touch within the step). Same non-overlapping initial grains on all sides.
 
 Units. The OpenFOAM side runs in the LES case's own units (h = 1 m, ν = 2·10⁻⁵ m²/s,
@@ -98,7 +98,7 @@ FREE_FORCES = {"forces.drag": True, "forces.weight": True, "forces.lift": False,
 
 # ------------------------------------------------------------------ units and parameters
 def load_free_case(extra=None):
-    from saltation.config import load_case
+    from saltation.case.schema import load_case
 
     return load_case(CASE, {**FREE_FORCES, "collisions.model": "soft", **(extra or {})})
 
@@ -108,7 +108,7 @@ def tracker_parameters(case, re_tau, nu=2.0e-5, h=1.0, rho_fluid=1000.0):
 
     Returns a dict: u_tau, d, rho_p, rho_f, nu, g, dt (s, LES units), kn (N/m), e, mu,
     the scales d/u_tau and the conversion factors."""
-    from saltation import contacts as C
+    from saltation.contacts import pairs as C
 
     u_tau = re_tau * nu / h
     re_star = case.shear_reynolds
@@ -423,7 +423,7 @@ def initial_grains(n, domain_d, seed, y_range=(0.6, 3.0), overlap_free=False):
     """Grain centres (particle units) uniformly random in x, z and the slab y ∈ y_range
     above the bed top — non-overlapping (random sequential insertion) when
     ``overlap_free``; the same points serve both codes."""
-    from saltation import contacts as C
+    from saltation.contacts import pairs as C
 
     if not overlap_free:
         rng = np.random.default_rng(seed)
@@ -437,8 +437,8 @@ def initial_grains(n, domain_d, seed, y_range=(0.6, 3.0), overlap_free=False):
 
 # ------------------------------------------------------------------ our side
 def _simulation(case, n):
-    from saltation.config import resolve_domain
-    from saltation.simulation import Simulation, _les_box_m, open_flow
+    from saltation.case.schema import resolve_domain
+    from saltation.engine.simulation import Simulation, _les_box_m, open_flow
 
     # The Simulation gives the run's coefficients (forces, bed, history, flow top); the
     # grains are ours, so the case keeps its own n_particles (N here may exceed the
@@ -456,7 +456,7 @@ def ours_free(case, pos, u0_particle, n_steps, warm_steps=5, frozen=False):
     1/62 of the data, so this isolates the memory traffic of the time series)."""
     import numba
 
-    from saltation.integrator import advance, make_state, make_workspace
+    from saltation.flight.spheres import advance, make_state, make_workspace
 
     numba.set_num_threads(1)
     n = len(pos)
@@ -508,8 +508,8 @@ def ours_contacts(case, pos, u0_particle, n_steps, skin=0.3, warm_steps=2):
     another. Returns timings, split into free flight and contacts."""
     import numba
 
-    from saltation import contacts as C
-    from saltation.integrator import advance, make_state, make_workspace
+    from saltation.contacts import pairs as C
+    from saltation.flight.spheres import advance, make_state, make_workspace
 
     numba.set_num_threads(1)
     n = len(pos)
@@ -579,17 +579,17 @@ def ours_contacts(case, pos, u0_particle, n_steps, skin=0.3, warm_steps=2):
 
 
 def ours_run_loop(case, pos, u0_particle, n_steps, warm_steps=2):
-    """Through the run loop's own stepper (``saltation.stepping.Stepper``: free flight →
+    """Through the run loop's own stepper (``saltation.engine.stepping.Stepper``: free flight →
     contacts → bed each step; with ``collisions.model = "soft"`` the contacts are
     sub-stepped only for grains that can touch within the step), one thread, when this
     checkout has it; else None."""
     import numba
 
     try:
-        from saltation.config import load_case
-        from saltation.integrator import make_state, make_workspace
-        from saltation.simulation import Simulation, _les_box_m, open_flow
-        from saltation.stepping import Stepper  # noqa: F401  (present = the run loop has contacts)
+        from saltation.case.schema import load_case
+        from saltation.engine.simulation import Simulation, _les_box_m, open_flow
+        from saltation.engine.stepping import Stepper  # noqa: F401  (present = the run loop has contacts)
+        from saltation.flight.spheres import make_state, make_workspace
     except ImportError:
         return None
     numba.set_num_threads(1)
@@ -599,7 +599,7 @@ def ours_run_loop(case, pos, u0_particle, n_steps, warm_steps=2):
     # the LES box in x and z; the reference height H of the concentration (SPEC §1) only
     # labels the run, and is raised where N grains would exceed the case's 5 % limit
     # (10 000 grains in this box are 5.4 % of its lower half: a throughput test only)
-    from saltation.config import MAX_CONCENTRATION
+    from saltation.case.schema import MAX_CONCENTRATION
     vol = n * math.pi / 6.0 * case.particle.diameter**3
     h = max(h, 1.01 * vol / (MAX_CONCENTRATION * lx * lz))
     case_n = load_case(case, {"run.n_particles": n, "run.domain": [lx, lz, h]})
@@ -684,7 +684,6 @@ def main():
     args = ap.parse_args()
 
     from flowfields import open_dataset
-    from saltation import contacts as C
 
     les = Path(args.les_case)
     if args.time is None and les.is_dir():
@@ -711,7 +710,7 @@ def main():
         runs = {"ours": [], "ours_frozen_snapshot": [], "ours_run_loop": []}
         case_off = load_free_case({"run.seed": args.seed, "collisions.model": "off"})
         runs.update({f"openfoam_maxCo{co:g}": [] for co in (args.max_co if have_of else [])})
-        for r in range(args.repeat):  # interleaved, so that both codes see the same load
+        for _r in range(args.repeat):  # interleaved, so that both codes see the same load
             runs["ours"].append(ours_free(case, pos, args.u0, args.steps_free))
             if have_of:
                 for co in args.max_co:

@@ -11,7 +11,7 @@ dataset's shape (48 × 30 × 48 cells × 80 snapshots, Re_τ = 395) — for mach
 shipped data are not there yet.
 
 Case: ``cases/default.toml`` (d = 0.69 mm quartz in water, τ*/τ*c = 1.79, dt = 0.02 d/u*,
-virtual bed). Grains start as in ``saltation/initial.py`` (near the bed, take-off-like
+virtual bed). Grains start as in ``saltation/grains/initial.py`` (near the bed, take-off-like
 velocities); a population of ``--spinup-grains`` is first run for ``--spinup`` d/u* so
 that it is mid-saltation (grains at every phase of their jumps, bed impacts included),
 then tiled to N grains with random streamwise/spanwise shifts. The kernel
@@ -51,17 +51,23 @@ sys.path.insert(0, str(ROOT))
 
 from flowfields import open_dataset, profile_dataset  # noqa: E402
 from flowfields.dataset import DatasetError, write_dataset  # noqa: E402
-from saltation import history  # noqa: E402
-from saltation.config import load_case, resolve_domain  # noqa: E402
-from saltation.flow import fluid_at_grain  # noqa: E402
-from saltation.forces import (  # noqa: E402
-    BASSET_PREFACTOR, ON_LIFT, R_SUBMERGED, RE_STAR, fluid_acceleration, make_coefficients)
-from saltation.history import history_end_step  # noqa: E402
-from saltation.initial import initial_conditions  # noqa: E402
-from saltation.integrator import GrainState, advance, make_state, make_workspace  # noqa: E402
-from saltation.bed import run_bed_parameters  # noqa: E402
-from saltation.simulation import _les_box_m  # noqa: E402
-from saltation.spin import spin_rate  # noqa: E402
+from saltation.bed.virtual import run_bed_parameters  # noqa: E402
+from saltation.case.schema import load_case, resolve_domain  # noqa: E402
+from saltation.engine.simulation import _les_box_m  # noqa: E402
+from saltation.flight.spheres import GrainState, advance, make_state, make_workspace  # noqa: E402
+from saltation.grains.initial import initial_conditions  # noqa: E402
+from saltation.physics import history  # noqa: E402
+from saltation.physics.fluid import fluid_at_grain  # noqa: E402
+from saltation.physics.forces import (  # noqa: E402
+    BASSET_PREFACTOR,
+    ON_LIFT,
+    R_SUBMERGED,
+    RE_STAR,
+    fluid_acceleration,
+    make_coefficients,
+)
+from saltation.physics.history import history_end_step  # noqa: E402
+from saltation.physics.spin import spin_rate  # noqa: E402
 
 CASE = ROOT / "cases" / "default.toml"
 
@@ -157,7 +163,7 @@ class Setup:
         return t0 + done * self.dt
 
     def spun_up(self, n0, duration):
-        """n0 grains from initial.py, run for `duration` d/u*: (state, t)."""
+        """n0 grains from grains/initial.py, run for `duration` d/u*: (state, t)."""
         pos, vel, spin = initial_conditions(n0, self.domain_d, self.seed)
         st = make_state(pos, vel, spin, 0.0, self.n_window)
         ws = make_workspace(n0)
@@ -229,11 +235,11 @@ def _sample_stages(f, re_star, pos, vel, t, dt, n_steps, lift, uf, grad, dudt, v
 def _force_stages(coef, x, n_steps, uf, grad, dudt, vort, top, bot, acc, dspin):
     # the 4 right-hand-side evaluations of a step: forces and spin rate
     n = x.shape[0]
-    for s in range(n_steps):
+    for _s in range(n_steps):
         for p in range(n):
             up = x[p, 3:6]
             spin = x[p, 6:9]
-            for stage in range(4):
+            for _stage in range(4):
                 fluid_acceleration(up, uf[p], grad[p], dudt[p], vort[p], spin, top[p], bot[p], coef, acc[p])
                 spin_rate(spin, vort[p], coef[R_SUBMERGED], coef[RE_STAR], dspin[p])
 
@@ -242,7 +248,7 @@ def _force_stages(coef, x, n_steps, uf, grad, dudt, vort, top, bot, acc, dspin):
 def _history_steps(coef, hc, dt, n_steps, vel, uf, hist_i, slip, meta, tail):
     # the Basset closure of a step (history.history_end_step)
     n = vel.shape[0]
-    for s in range(n_steps):
+    for _s in range(n_steps):
         for p in range(n):
             history_end_step(vel[p], uf[p], hist_i[p], coef[BASSET_PREFACTOR], dt, slip[p], meta[p], tail[p],
                              hc.window_weights, hc.tail_weight, hc.tail_decay, hc.tail_c_old, hc.tail_c_new,
@@ -279,7 +285,7 @@ def time_components(setup, st0, t0, n, work, repeat):
     out = {}
     for name, job in jobs.items():
         job(1)  # compile
-        out[name] = round(_best_cpu(lambda: job(steps), repeat) / (n * steps) * 1e6, 3)
+        out[name] = round(_best_cpu(lambda job=job: job(steps), repeat) / (n * steps) * 1e6, 3)
     return out
 
 

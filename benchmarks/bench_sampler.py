@@ -43,7 +43,7 @@ def main():
             continue
         numba.set_num_threads(threads)
         times = []
-        for r in range(args.repeat):
+        for _r in range(args.repeat):
             tp = rng.uniform(0, ds.times[-1] + ds.snapshot_interval if ds.n_snapshots > 1 else 1.0)
             t0 = time.perf_counter()
             sample_many(f, pts, tp, u, g, d, s)

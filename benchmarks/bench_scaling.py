@@ -26,16 +26,16 @@ excluded (warm-up on a small run in the same process first). Peak RSS: the proce
 ``ru_maxrss`` at the end minus its value after the warm-up (imports, dataset, compiled
 code), divided by N.
 
-The contact phase (collide.py) sub-steps only the grains that can touch something in the
+The contact phase (contacts/phase.py) sub-steps only the grains that can touch something in the
 step (column "sub-st.%": grain-sub-steps done / (N x sub-steps)); it copies them and their
 list neighbours into compact, cell-ordered arrays once per step, runs the 128 sub-steps
-on those and scatters the result back (collide.py, "Memory layout"), so the cost per
+on those and scatters the result back (contacts/phase.py, "Memory layout"), so the cost per
 grain-sub-step should not grow with N. Column "ns/g-sub": contact-phase wall time per
 grain-sub-step done (it also carries the phase's O(N) passes: reach, list rebuild,
 engagement test, gather). The sub-stepped share depends on how far the grains have
 spread from their initial layer; every point gets the same spin-up and timed steps, so
 in series (a) the sub-stepped share should come out the same at every N.
-Columns "blk/st" and "redo": blocks per step and contact phases redone (collide.py,
+Columns "blk/st" and "redo": blocks per step and contact phases redone (contacts/phase.py,
 "Blocks": the sub-stepped grains run block by block while each block sits in cache).
 
 Prints a table and one JSON object (also written to ``--json``). The machine may be
@@ -86,9 +86,9 @@ def one_point(args) -> dict:
     """Runs in a child process: warm up, measure one (N, domain) point."""
     import numba
 
-    from saltation.config import load_case, resolve_domain
-    from saltation.integrator import make_workspace
-    from saltation.simulation import Simulation, _les_box_m, open_flow
+    from saltation.case.schema import load_case, resolve_domain
+    from saltation.engine.simulation import Simulation, _les_box_m, open_flow
+    from saltation.flight.spheres import make_workspace
 
     numba.set_num_threads(args.threads)
 
@@ -159,7 +159,7 @@ def one_point(args) -> dict:
         out["contacts_ns_per_grain_substep"] = 1e9 * pc / float(d[3]) if d[3] else None
         out["collisions_per_particle"] = float(stepper.cl.collisions.sum()) / sim.n
         out["missed_contacts"] = int(d[4])
-        out["blocks_per_step"] = float(d[5]) / timed  # collide.py, "Blocks"
+        out["blocks_per_step"] = float(d[5]) / timed  # contacts/phase.py, "Blocks"
         out["phases_redone_unblocked"] = int(d[6])
         out["phases_redone_merged"] = int(d[7])
     return out

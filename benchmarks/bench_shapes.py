@@ -17,9 +17,12 @@ import numba
 import numpy as np
 
 from flowfields import open_dataset
-from saltation.bed import bed_parameters
-from saltation import clusters, history, integrator, shapes
-from saltation.forces import CM, make_coefficients
+from saltation.bed.virtual import bed_parameters
+from saltation.flight import composites as clusters
+from saltation.flight import spheres as integrator
+from saltation.grains import shapes
+from saltation.physics import history
+from saltation.physics.forces import CM, make_coefficients
 
 
 def main(argv=None):

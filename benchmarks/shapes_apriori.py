@@ -1,7 +1,7 @@
 """A priori test of the bonded-sphere grains (seed 000 §3, Figs. 5-6).
 
 100 random composites of the Smith (2003) mixture, Dl uniform in 0.2-2 mm, axis ratios
-uniform in each Zingg class (saltation.shapes.DEFAULT_RATIOS): mass and the three
+uniform in each Zingg class (saltation.grains.shapes.DEFAULT_RATIOS): mass and the three
 moments of inertia about the geometric axes (x long, y intermediate, z short, through
 the centre of mass) against (1) the ellipsoid with the same axes and (2) the elliptic
 cylinder of length Dl and section Di × Ds. Writes apriori.csv, apriori_summary.json and
@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from saltation import shapes
+from saltation.grains import shapes
 
 DENSITY = 2650.0  # kg/m³ (quartz; the ratios do not depend on it)
 

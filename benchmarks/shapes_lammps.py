@@ -1,4 +1,4 @@
-"""Rigid-body integrator of saltation.clusters against LAMMPS ``fix rigid`` (no fluid).
+"""Rigid-body integrator of saltation.flight.composites against LAMMPS ``fix rigid`` (no fluid).
 
 Two checks on the same clump (an asymmetric equant of sub-type 4, four spheres, three
 distinct principal moments, non-diagonal inertia in its geometric frame; scaled to
@@ -30,9 +30,11 @@ from pathlib import Path
 
 import numpy as np
 
-from saltation.bed import bed_parameters
-from saltation import clusters, history, shapes
-from saltation.forces import make_coefficients
+from saltation.bed.virtual import bed_parameters
+from saltation.flight import composites as clusters
+from saltation.grains import shapes
+from saltation.physics import history
+from saltation.physics.forces import make_coefficients
 
 R = 1.65
 TAU_STAR = 1.0 / (1.0 + R)  # g_eff = 1/((1+R) τ*) = 1
@@ -54,7 +56,7 @@ def _lammps_input(comp, pos, vel, quat, omega, *, gravity, wall, dt, steps, ever
     rw = comp.centres @ rot.T
     lines = ["units lj", "atom_style sphere", "boundary f f f", "comm_modify vel yes",
              "region box block -50 50 -1 60 -50 50", "create_box 1 box"]
-    for k, r in enumerate(rw):
+    for r in rw:
         x = np.asarray(pos) + r
         lines.append(f"create_atoms 1 single {x[0]:.17g} {x[1]:.17g} {x[2]:.17g}")
     for k, r in enumerate(rw):

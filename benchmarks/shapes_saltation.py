@@ -35,9 +35,9 @@ import numpy as np
 import pandas as pd
 
 from saltation.analysis.transport import einstein_number, transport_rate
-from saltation.simulation import run
-from saltation.run_clusters import CLASS_IDS, spin_statistics
-from saltation.shapes import CLASSES
+from saltation.engine.composites import CLASS_IDS, spin_statistics
+from saltation.engine.simulation import run
+from saltation.grains.shapes import CLASSES
 
 DN = 0.69e-3  # m, nominal diameter (seed 003's validation grain)
 

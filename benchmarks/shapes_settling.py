@@ -20,7 +20,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from saltation import settling, shapes
+from saltation.grains import shapes
+from saltation.studies import settling
 
 # (class, Di/Dl, Ds/Di): one representative grain per class and equant sub-type
 SHAPES = [("disk", 0.85, 0.4), ("blade", 0.5, 0.45), ("rod", 0.45, 0.85),

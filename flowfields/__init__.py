@@ -6,7 +6,7 @@ from ._numba_cache import use_versioned_cache
 
 use_versioned_cache()  # before any kernel is compiled or loaded
 
-from .dataset import DatasetError, FlowDataset, open_dataset, SHIPPED_DATASET
-from .analytic import profile_dataset
+from .analytic import profile_dataset  # noqa: E402  (after the cache is set)
+from .dataset import SHIPPED_DATASET, DatasetError, FlowDataset, open_dataset  # noqa: E402
 
 __all__ = ["open_dataset", "FlowDataset", "DatasetError", "profile_dataset", "SHIPPED_DATASET"]

@@ -102,7 +102,7 @@ def closure_stamp(path: Path, root: Path | None = None) -> str:
     return h.hexdigest()
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _closure_stamp(py_file: str) -> str:
     return closure_stamp(Path(py_file).resolve())
 

@@ -17,7 +17,6 @@ each wall, averaged over walls, planes and snapshots (SPEC §3).
 from __future__ import annotations
 
 import json
-import re
 import xml.etree.ElementTree as ET
 from pathlib import Path
 

@@ -31,8 +31,8 @@ import re
 import shutil
 import subprocess
 import time
+from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
-from typing import Callable, Iterable, Sequence
 
 import numpy as np
 
@@ -673,7 +673,7 @@ def run_tool(args: Sequence[str], case: Path, log_name: str, *, commands: list |
                         commands[-1]["wall_s"] = round(time.time() - t0, 2)
                         commands[-1]["returncode"] = "stopped: diverged"
                     raise OpenFOAMError(f"{tool} diverged in {case}, stopped; log {log} line {bad[0]}: "
-                                        f"{bad[1].strip()!r} (try a smaller --max-courant, or convection LUST)")
+                                        f"{bad[1].strip()!r} (try a smaller --max-courant, or convection LUST)") from None
     if commands is not None:
         commands[-1]["wall_s"] = round(time.time() - t0, 2)
         commands[-1]["returncode"] = rc

@@ -47,7 +47,7 @@ How the kernels are made fast (they run four times per grain and time step):
 * the y search is a binary search of fixed trip count with a conditional move;
 * ``gather_cell`` / ``velocity_in_cell`` split a velocity sample into the cell's 8
   nodes blended in time and the trilinear weights, so that a caller can reuse the
-  gathered nodes for another point of the same cell at the same time (integrator.py:
+  gathered nodes for another point of the same cell at the same time (flight/spheres.py:
   the two RK4 stages at t + Δt/2, and the last stage and the end-of-step sample at t + Δt);
 * the public kernels are compiled without reference counting (``_nrt=False``: they
   take arrays and allocate nothing, and an atomic increment/decrement per array
@@ -283,7 +283,7 @@ def gather_cell(f, n0, n1, wt, i0, i1, j0, j1, k0, k1):
     """The 8 nodes of a located cell, each read once with its 3 components (adjacent in
     memory) and blended in time: 24 raw values, node by node in the order 000, 100,
     010, 110, 001, 101, 011, 111. Points of one cell at one time share it
-    (integrator.py reuses it between RK4 stages)."""
+    (flight/spheres.py reuses it between RK4 stages)."""
     d = f.data
     a = _node_velocity(d, n0, n1, wt, i0, j0, k0)
     b = _node_velocity(d, n0, n1, wt, i1, j0, k0)

@@ -13,8 +13,8 @@ class UsageError(ValueError):
 
 
 def _out_dir(path, option="--out") -> Path:
-    """An --out folder checked before any long work (saltation.run_directory)."""
-    from .run_directory import check_output_directory
+    """An --out folder checked before any long work (saltation.io.run_directory)."""
+    from .io.run_directory import check_output_directory
 
     return check_output_directory(path, option)
 
@@ -22,7 +22,7 @@ def _out_dir(path, option="--out") -> Path:
 def _flow_info(args) -> int:
     from flowfields import open_dataset
 
-    from .flow import BED_TOLERANCE
+    from .physics.fluid import BED_TOLERANCE
 
     ds = open_dataset(args.dataset)
     info = ds.describe()
@@ -189,8 +189,8 @@ def _blame_set(err, given: dict) -> str:
 
 
 def _run(args) -> int:
-    from .config import CaseError, load_case
-    from .simulation import RunInterrupted, run
+    from .case.schema import CaseError, load_case
+    from .engine.simulation import RunInterrupted, run
 
     overrides, given = _set_options(args.set)
     try:  # the case and the output folder first: bad input is an error before any long work
@@ -272,9 +272,8 @@ class _QuietDaskAfterCtrlC:
         return self
 
     def __exit__(self, exc_type, exc, tb):
-        import signal
-
         import logging
+        import signal
 
         if isinstance(exc, KeyboardInterrupt):  # distributed's own handler stays filtered: the
             self._quiet()                       # cluster's exit-time close still logs
@@ -306,7 +305,7 @@ class _QuietDaskAfterCtrlC:
 
 def _check_scheduler_address(address: str) -> None:
     """--scheduler must read [SCHEME://]HOST:PORT with a scheme Dask knows."""
-    from .sweep import import_dask
+    from .studies.sweep import import_dask
 
     import_dask()
     from distributed.comm.addressing import parse_address
@@ -322,7 +321,7 @@ def _check_scheduler_address(address: str) -> None:
 
 
 def _sweep(args) -> int:
-    from .sweep import format_table, load_sweep, run_sweep
+    from .studies.sweep import format_table, load_sweep, run_sweep
 
     sweep = load_sweep(args.sweep)
     out = Path(args.out or Path("sweeps") / (sweep.path.stem if sweep.path else "sweep"))
@@ -379,7 +378,7 @@ def _analyze(args) -> int:
 
 
 def _validate(args) -> int:
-    from .validate import read_experiments, run_validation
+    from .studies.validate import read_experiments, run_validation
 
     if args.data:  # before the runs: a wrong file is an error now, not after them
         try:
@@ -394,7 +393,7 @@ def _validate(args) -> int:
     _out_dir(args.out)
     flows = tuple(args.flow) if args.flow else None
     if flows:
-        from .validate import FLOWS
+        from .studies.validate import FLOWS
 
         bad = [f for f in flows if f not in FLOWS]
         if bad:
@@ -552,7 +551,7 @@ def _interrupted(args) -> str:
     if cmd == "run":
         if out is None:
             return "saltation: interrupted while loading the case; nothing was written"
-        from .run_directory import CHECKPOINT_NAME
+        from .io.run_directory import CHECKPOINT_NAME
 
         sets = "".join(f" --set {shlex.quote(x)}" for x in args.set or [])
         if (out / CHECKPOINT_NAME).exists():
@@ -584,11 +583,10 @@ def main(argv=None) -> int:
         from flowfields.openfoam import OpenFOAMError
 
         from .analysis.variance import AnalysisError
-        from .config import CaseError
-        from .run_directory import RunDirectoryError
-        from .run_directory import OutputDirectoryError
-        from .simulation import SimulationError
-        from .sweep import MissingExtraError
+        from .case.schema import CaseError
+        from .engine.simulation import SimulationError
+        from .io.run_directory import OutputDirectoryError, RunDirectoryError
+        from .studies.sweep import MissingExtraError
 
         try:
             return int(args.func(args) or 0)

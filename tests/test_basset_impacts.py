@@ -4,8 +4,8 @@ two differ; the option is checked."""
 import numpy as np
 import pytest
 
-from saltation.config import CaseError, load_case
-from saltation.simulation import run
+from saltation.case.schema import CaseError, load_case
+from saltation.engine.simulation import run
 
 D = 0.69e-3
 

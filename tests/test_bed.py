@@ -1,15 +1,16 @@
-"""Bed rebound and virtual rough bed (saltation/bed.py, SPEC §4), and the
-counter-based random numbers they draw from (saltation/rng.py)."""
+"""Bed rebound and virtual rough bed (saltation/bed/virtual.py, SPEC §4), and the
+counter-based random numbers they draw from (saltation/physics/rng.py)."""
 
 import math
 
 import numpy as np
 import pytest
-from hypothesis import given, settings, strategies as st
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from numba import njit
 
-from saltation import bed as B
-from saltation import rng
+from saltation.bed import virtual as B
+from saltation.physics import rng
 
 R = 0.5
 INERTIA = 0.4 * R * R          # (2/5) m r², m = 1

@@ -1,11 +1,11 @@
-"""Cell partitioning and neighbour search (saltation/cells.py): counting sort invariants,
+"""Cell partitioning and neighbour search (saltation/contacts/cells.py): counting sort invariants,
 stencils, and no pair missed across cell and periodic boundaries (against brute force)."""
 import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from saltation.cells import (
+from saltation.contacts.cells import (
     allocate_cells,
     build_cells,
     build_neighbour_list,

@@ -12,12 +12,21 @@ import sys
 import time
 from pathlib import Path
 
-import numpy as np
 import pandas as pd
 import pytest
 
-from saltation.config import load_case
-from saltation.simulation import CHECKPOINT, PARTS, RunInterrupted, Simulation, SimulationError, open_flow, resolve_domain, run, _les_box_m
+from saltation.case.schema import load_case
+from saltation.engine.simulation import (
+    CHECKPOINT,
+    PARTS,
+    RunInterrupted,
+    Simulation,
+    SimulationError,
+    _les_box_m,
+    open_flow,
+    resolve_domain,
+    run,
+)
 
 ROOT = Path(__file__).resolve().parents[1]
 

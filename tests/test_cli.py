@@ -26,7 +26,7 @@ def test_run_writes_the_run_directory(tmp_path, capsys):
     assert list(tr.columns) == ["particle", "t", "x", "y", "z", "u", "v", "w", "spin_x", "spin_y", "spin_z"]
     assert tr["particle"].nunique() == 20
     # the config written back reloads and names the values used
-    from saltation.config import load_case
+    from saltation.case.schema import load_case
 
     c = load_case(out / "config.toml")
     assert c.run.n_particles == 20 and c.run.duration == pytest.approx(0.3)

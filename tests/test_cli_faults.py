@@ -14,13 +14,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import saltation.simulation
-import saltation.sweep
-import saltation.validate
+import saltation.engine.simulation
+import saltation.studies.sweep
+import saltation.studies.validate
 from flowfields import DatasetError, open_dataset
 from flowfields.dataset import write_dataset
 from saltation.cli import main
-from saltation.run_directory import (
+from saltation.io.run_directory import (
     CHECKPOINT_NAME,
     OutputDirectoryError,
     check_output_directory,
@@ -37,9 +37,9 @@ def no_long_work(monkeypatch):
     def boom(*a, **k):
         raise AssertionError("the bad input was not caught before the long work")
 
-    monkeypatch.setattr(saltation.simulation, "run", boom)
-    monkeypatch.setattr(saltation.sweep, "run_case", boom)
-    monkeypatch.setattr(saltation.validate, "run_validation", boom)
+    monkeypatch.setattr(saltation.engine.simulation, "run", boom)
+    monkeypatch.setattr(saltation.studies.sweep, "run_case", boom)
+    monkeypatch.setattr(saltation.studies.validate, "run_validation", boom)
 
 
 def one_error_line(capsys) -> str:
@@ -90,7 +90,7 @@ def test_out_that_cannot_be_written(tmp_path, capsys, no_long_work, monkeypatch)
     def refuse(*a, dir=None, **k):
         raise PermissionError(13, "Permission denied", str(dir))
 
-    monkeypatch.setattr("saltation.run_directory.tempfile", types.SimpleNamespace(mkstemp=refuse))
+    monkeypatch.setattr("saltation.io.run_directory.tempfile", types.SimpleNamespace(mkstemp=refuse))
     assert main(["run", LOGLAW, "--quiet", "--out", str(target / "run"), *TINY]) == 2
     line = one_error_line(capsys)
     assert str(target / "run") in line and "cannot be written" in line and "Permission denied" in line
@@ -286,11 +286,11 @@ def main_no_escape(argv) -> int:
 
 
 @pytest.mark.parametrize("command, target, words", [
-    (["run", LOGLAW, "--quiet", "--out", "OUT"], "saltation.simulation.run",
+    (["run", LOGLAW, "--quiet", "--out", "OUT"], "saltation.engine.simulation.run",
      ["nothing to resume", "start again with: saltation run"]),
-    (["sweep", str(ROOT / "cases" / "concentration_sweep_reduced.toml"), "--out", "OUT"], "saltation.sweep.run_sweep",
+    (["sweep", str(ROOT / "cases" / "concentration_sweep_reduced.toml"), "--out", "OUT"], "saltation.studies.sweep.run_sweep",
      ["sweep interrupted", "run the same command again"]),
-    (["validate", "nino-garcia", "--no-ablation", "--out", "OUT"], "saltation.validate.run_validation",
+    (["validate", "nino-garcia", "--no-ablation", "--out", "OUT"], "saltation.studies.validate.run_validation",
      ["validate interrupted"]),
     (["analyze", ".", "--out", "OUT"], "saltation.analysis.report.analyze", ["analyze interrupted"]),
     (["flow", "info"], "flowfields.open_dataset", ["flow info interrupted"]),
@@ -314,7 +314,7 @@ def test_ctrl_c_before_stepping_with_a_checkpoint_names_the_resume(tmp_path, cap
         raise KeyboardInterrupt
 
     out.mkdir()
-    monkeypatch.setattr(saltation.simulation, "run", interrupted_while_loading)
+    monkeypatch.setattr(saltation.engine.simulation, "run", interrupted_while_loading)
     assert main_no_escape(["run", LOGLAW, "--quiet", "--resume", "--out", str(out), "--set", "run.seed=4"]) == 130
     err = capsys.readouterr().err
     assert len(err.strip().splitlines()) == 1 and "Traceback" not in err

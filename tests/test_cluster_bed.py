@@ -1,4 +1,4 @@
-"""Bonded-sphere grains on the packed bed (saltation.cluster_bed): rebound along the real
+"""Bonded-sphere grains on the packed bed (saltation.bed.packed_composites): rebound along the real
 normal, no overlap left, no energy created, and a full run through saltation.run."""
 import math
 
@@ -6,10 +6,13 @@ import numpy as np
 import pytest
 
 from flowfields import profile_dataset
-from saltation.bed import bed_parameters
-from saltation import cluster_bed, clusters, history, shapes
-from saltation.forces import make_coefficients
-from saltation.packed_bed import make_packed_bed
+from saltation.bed import packed_composites as cluster_bed
+from saltation.bed.packed import make_packed_bed
+from saltation.bed.virtual import bed_parameters
+from saltation.flight import composites as clusters
+from saltation.grains import shapes
+from saltation.physics import history
+from saltation.physics.forces import make_coefficients
 
 DT = 0.01
 NW = 10
@@ -134,7 +137,7 @@ def test_dropped_composites_never_overlap_the_bed_and_create_no_energy():
 
 
 def test_mixture_run_on_the_packed_bed(tmp_path):
-    from saltation.simulation import run
+    from saltation.engine.simulation import run
 
     case = {"particle": {"diameter": 0.69e-3, "shape": "mixture"},
             "flow": {"source": "les", "tau_ratio": 2.43},

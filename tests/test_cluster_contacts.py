@@ -1,4 +1,4 @@
-"""Soft grain–grain contacts between bonded-sphere grains (saltation.cluster_contacts):
+"""Soft grain–grain contacts between bonded-sphere grains (saltation.contacts.composites):
 the one-sphere grain is the sphere contact; an oblique frictional collision of two
 asymmetric grains conserves linear and angular momentum; the cell search misses no pair
 across cell and periodic boundaries; overlaps stay small in a dense mixture run."""
@@ -8,11 +8,13 @@ import numpy as np
 import pytest
 
 from flowfields import profile_dataset
-from saltation.bed import bed_parameters
-from saltation import cluster_contacts as ccm
-from saltation import clusters, history, shapes
-from saltation.contacts import advance_granular, make_contact_list, make_contact_model
-from saltation.forces import make_coefficients
+from saltation.bed.virtual import bed_parameters
+from saltation.contacts import composites as ccm
+from saltation.contacts.pairs import advance_granular, make_contact_list, make_contact_model
+from saltation.flight import composites as clusters
+from saltation.grains import shapes
+from saltation.physics import history
+from saltation.physics.forces import make_coefficients
 
 R = 1.65
 DT = 0.01
@@ -83,7 +85,7 @@ def test_one_sphere_grains_head_on_reproduce_the_sphere_contact():
     assert np.abs(p1 - p0).max() < 1e-13 * st.mass[0] * 2.0
     assert cc.collisions.tolist() == [1, 1]
     assert 0.0 < cc.max_overlap.max() < 0.01  # ≈ 0.0033 d at 4 u*
-    # the sphere contact code (contacts.py), same stiffness, restitution, sub-step
+    # the sphere contact code (contacts/pairs.py), same stiffness, restitution, sub-step
     model = make_contact_model(KN_SPHERE, e, f)
     ps, vs, ws = pos.copy(), vel.copy(), np.zeros((2, 3))
     cl = make_contact_list(ps, BOX, (True, False, True), 1.0, 0.3)
@@ -201,7 +203,7 @@ def test_dense_mixture_run_on_the_les_keeps_overlaps_small(tmp_path):
     happen, component overlaps stay ≲ a few % of Dn, the per-grain counts add up."""
     import pandas as pd
 
-    from saltation.simulation import run
+    from saltation.engine.simulation import run
 
     case = {"particle": {"diameter": 0.69e-3, "shape": "mixture"},
             "flow": {"source": "les", "tau_ratio": 1.79},

@@ -1,4 +1,4 @@
-"""Rigid bonded-sphere grains (saltation.clusters): the one-sphere grain is the sphere
+"""Rigid bonded-sphere grains (saltation.flight.composites): the one-sphere grain is the sphere
 integrator; torque-free rotation conserves L and energy; shear exerts a torque; bed
 impacts never create energy."""
 import math
@@ -7,9 +7,12 @@ import numpy as np
 import pytest
 
 from flowfields import open_dataset, profile_dataset
-from saltation.bed import bed_parameters
-from saltation import clusters, history, integrator, shapes
-from saltation.forces import make_coefficients
+from saltation.bed.virtual import bed_parameters
+from saltation.flight import composites as clusters
+from saltation.flight import spheres as integrator
+from saltation.grains import shapes
+from saltation.physics import history
+from saltation.physics.forces import make_coefficients
 
 DT = 0.01
 NW = 10

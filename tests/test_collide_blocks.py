@@ -1,13 +1,13 @@
-"""Temporal blocking of the contact phase (collide.py, "Blocks"): the sub-stepped grains
+"""Temporal blocking of the contact phase (contacts/phase.py, "Blocks"): the sub-stepped grains
 run block by block, and the result must be the one of a single sweep over all of them,
 bit for bit, both when the blocks stay apart and when a deflected grain crosses into
 another block (the phase is then redone with the two groups joined, and after
 MERGED_PASSES such passes as one block)."""
 import numpy as np
-
-from saltation import contacts as K
-from saltation.collide import MERGED_PASSES
 from test_collide_layout import run_contact_phase
+
+from saltation.contacts import pairs as K
+from saltation.contacts.phase import MERGED_PASSES
 
 
 def _run(pos0, vel0, block_members, box, skin, steps, dt, n_sub=128, block_slack=None):
@@ -47,7 +47,7 @@ def test_blocks_give_the_single_sweep_result_in_a_dense_layer_over_the_bed():
 
 def test_giant_groups_are_cut_with_tighter_slacks_and_give_the_same_result():
     # a denser layer (13.6 % solids); groups of more than 10 members are cut with zero
-    # slack (collide.py, "Blocks"): more blocks, crossings redone, the single sweep's result
+    # slack (contacts/phase.py, "Blocks"): more blocks, crossings redone, the single sweep's result
     box, pos, vel = _layer(12.0, 5)
     default = _run(pos, vel, 1, box, 0.6, 5, 0.02)
     cut = _run(pos, vel, 1, box, 0.6, 5, 0.02, block_slack=(0.2, 0.05, 0.0, 0.0, 10))

@@ -1,12 +1,19 @@
-"""The contact phase's compact layout (collide.py, "Memory layout"): a grain woken on a
+"""The contact phase's compact layout (contacts/phase.py, "Memory layout"): a grain woken on a
 deflected path gets its neighbour row from the grain arrays, its own neighbours joining
 the compact set; the set grows without losing its contents; bystanders change nothing."""
 import numpy as np
 
-from saltation import contacts as K
-from saltation.collide import empty_substep_set, _grow, _make_set, make_bed_context, make_contact_phase, soft_contact_phase
-from saltation.integrator import make_state, make_workspace
-from saltation.packed_bed import make_packed_bed
+from saltation.bed.packed import make_packed_bed
+from saltation.contacts import pairs as K
+from saltation.contacts.phase import (
+    _grow,
+    _make_set,
+    empty_substep_set,
+    make_bed_context,
+    make_contact_phase,
+    soft_contact_phase,
+)
+from saltation.flight.spheres import make_state, make_workspace
 
 
 def run_contact_phase(pos0, vel0, steps=3, dt=0.02, n_sub=128, box=(12.0, 8.0, 12.0), skin=0.6, friction=0.2,

@@ -1,5 +1,5 @@
-"""Grain contacts and the packed bed inside the run loop (issue 4; collide.py, stepping.py,
-packed_bed.py). The binary collision physics itself is tested in test_contacts.py; here:
+"""Grain contacts and the packed bed inside the run loop (issue 4; contacts/phase.py, engine/stepping.py,
+bed/packed.py). The binary collision physics itself is tested in test_contacts.py; here:
 the contact phase reproduces contacts.advance_granular on straight free-flight paths, runs
 with contacts keep overlaps small and grains above the bed, contacts change the result,
 and the packed bed rebounds along the real normal and is never penetrated."""
@@ -8,13 +8,12 @@ import math
 import numpy as np
 import pytest
 
-from saltation.bed import bed_parameters
-from saltation import contacts as K
-from saltation.collide import empty_substep_set, make_bed_context, make_contact_phase, soft_contact_phase
-from saltation.integrator import make_state
-from saltation.packed_bed import BED_CENTRE_Y, hexagonal_layer, make_packed_bed, packed_bed_check_particle
-from saltation.integrator import make_workspace
-from saltation.simulation import run
+from saltation.bed.packed import BED_CENTRE_Y, hexagonal_layer, make_packed_bed, packed_bed_check_particle
+from saltation.bed.virtual import bed_parameters
+from saltation.contacts import pairs as K
+from saltation.contacts.phase import empty_substep_set, make_bed_context, make_contact_phase, soft_contact_phase
+from saltation.engine.simulation import run
+from saltation.flight.spheres import make_state, make_workspace
 
 D = 0.69e-3
 

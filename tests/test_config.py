@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from saltation.config import (
+from saltation.case.schema import (
     PAPER_DOMAIN_M,
     Case,
     CaseError,
@@ -17,8 +17,6 @@ from saltation.config import (
     parse_overrides,
     resolve_domain,
 )
-
-import tomllib
 
 # single-run case files; sweep files (a [sweep] table) are checked in tests/test_sweep.py
 CASES = sorted(p for p in (Path(__file__).resolve().parent.parent / "cases").glob("*.toml")

@@ -1,4 +1,4 @@
-"""Grain–grain contacts (saltation/contacts.py, SPEC §5): restitution, conservation laws,
+"""Grain–grain contacts (saltation/contacts/pairs.py, SPEC §5): restitution, conservation laws,
 Newton's third law and the symmetric tangential history, the hard-sphere impulse, no
 missed contacts, counters, and the conversion from a case."""
 import math
@@ -9,8 +9,8 @@ import pytest
 from hypothesis import assume, example, given, settings
 from hypothesis import strategies as st
 
-from saltation import contacts as C
-from saltation.config import load_case
+from saltation.case.schema import load_case
+from saltation.contacts import pairs as C
 
 BOX = (12.0, 12.0, 12.0)
 

@@ -14,8 +14,7 @@ import pandas as pd
 import pytest
 
 from saltation.analysis.diffusion import MIN_PARTICLES, exponents, jump_duration_from_tracks
-from saltation.analysis.variance import (AnalysisError, VarianceAccumulator, make_plan, read_sums,
-                                         variance_curves)
+from saltation.analysis.variance import AnalysisError, VarianceAccumulator, make_plan, read_sums, variance_curves
 
 
 def frame(x, z, dt, y=None):
@@ -169,7 +168,7 @@ def test_accumulator_fed_in_steps_equals_tracks_path():
     np.testing.assert_allclose(vz[1:], ref.curves["var_z"].to_numpy(), rtol=1e-10)
     assert (n_or == len(plan.origins)).all()
     # direct check of one cell: origin 0, the largest lag
-    o, lag = plan.origins[0], plan.lags[-1]
+    _o, lag = plan.origins[0], plan.lags[-1]
     direct = np.mean([np.var(x[:, oo + lag] - x[:, oo], ddof=1) for oo in plan.origins])
     assert vx[-1] == pytest.approx(direct, rel=1e-10)
 
@@ -243,8 +242,8 @@ def test_bad_window():
 def test_run_writes_variance_and_exponents_reads_it(tmp_path):
     """A short LES run: variance.parquet from the run loop equals the tracks-based
     statistics when tracks are sampled on the same grid."""
-    from saltation.config import load_case
-    from saltation.simulation import run
+    from saltation.case.schema import load_case
+    from saltation.engine.simulation import run
 
     case = load_case("cases/default.toml", {"run.n_particles": 24, "run.duration": 1.0, "output.vtk": False})
     iv = case.variance_every * case.dt
@@ -269,8 +268,8 @@ def test_run_directory_and_its_tracks_dataframe_give_the_same_windows(tmp_path):
     curves are the same and so are t_c and the windows (to 1e-9: the curves agree to
     rounding); tracks sampled every 0.5 d/u* (the default) give a t_c inside the 95 %
     interval of the directory's and vice versa. The two T_J differ and are reported only."""
-    from saltation.config import load_case
-    from saltation.simulation import run
+    from saltation.case.schema import load_case
+    from saltation.engine.simulation import run
 
     over = {"run.n_particles": 40, "run.duration": 1.5, "output.vtk": False}
     case = load_case("cases/default.toml", over)
@@ -299,8 +298,8 @@ def test_run_directory_and_its_tracks_dataframe_give_the_same_windows(tmp_path):
 def test_variance_survives_interrupt_and_resume(tmp_path):
     """A run stopped mid-way (checkpoint) and resumed writes the variance.parquet of the
     uninterrupted run, bit for bit; the sums travel in the run's checkpoint."""
-    from saltation.config import load_case, resolve_domain
-    from saltation.simulation import CHECKPOINT, RunInterrupted, Simulation, open_flow, run
+    from saltation.case.schema import load_case, resolve_domain
+    from saltation.engine.simulation import CHECKPOINT, RunInterrupted, Simulation, open_flow, run
 
     case = {"particle": {"diameter": 0.69e-3}, "flow": {"source": "loglaw", "tau_ratio": 1.79},
             "run": {"n_particles": 16, "duration": 0.8, "dt_particle": 0.02, "seed": 3, "threads": 1},

@@ -1,11 +1,11 @@
-"""Free-flight force terms (saltation/forces.py, SPEC §2)."""
+"""Free-flight force terms (saltation/physics/forces.py, SPEC §2)."""
 
 import math
 
 import numpy as np
 import pytest
 
-from saltation import forces as F
+from saltation.physics import forces as F
 
 RE_STAR = 17.4       # d = 0.69 mm, Rp = 73, tau* ~ 0.057
 TAU_STAR = 0.057

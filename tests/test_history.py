@@ -1,4 +1,4 @@
-"""Basset history integral: window + exponential tail (saltation/history.py).
+"""Basset history integral: window + exponential tail (saltation/physics/history.py).
 
 Orders are measured, not assumed: each convergence test fits the observed order
 over successive halvings of Δt and checks it against the order the scheme is
@@ -12,7 +12,7 @@ import pytest
 from scipy.integrate import quad
 from scipy.special import dawsn, fresnel, wofz
 
-from saltation import history as H
+from saltation.physics import history as H
 
 
 # ------------------------------------------------------------------ helpers
@@ -266,7 +266,7 @@ def exact_ramp_response(A, b, c, t):
 
 
 def rk4_with_history(A, b, c, T, n, n_window, ramp, fluid=None, full=False):
-    """Classic RK4 with the Basset term as history.py documents it: I_n held
+    """Classic RK4 with the Basset term as physics/history.py documents it: I_n held
     over the stages, then the implicit trapezoidal step end.  The model is
     du/dt = A(t) - b (u - U) - c I[u - U], U a uniform steady fluid velocity
     (zero by default), starting at zero slip: u(0) = U."""
@@ -407,7 +407,7 @@ def test_a_step_in_slip_enters_the_history_as_delta_over_sqrt_lag():
         n_c = int(round(0.5 / dt))
         t_c = n_c * dt
 
-        def step_only(t, post):
+        def step_only(t, post, t_c=t_c):
             return delta if t > t_c - (1e-12 if post else -1e-12) else 0.0 * delta
 
         rows = _drive_prescribed_slip(step_only, {n_c}, dt, int(round(3.0 / dt)))
@@ -421,7 +421,7 @@ def test_a_step_in_slip_enters_the_history_as_delta_over_sqrt_lag():
             k = int(round(t_check / dt)) - 1
             np.testing.assert_allclose(rows[k][2], delta / np.sqrt(ts[k] - t_c), rtol=3e-3)
     # with a smooth part too: both parts together (the smooth part second order after its
-    # finite-acceleration start, history.py)
+    # finite-acceleration start, physics/history.py)
     a = np.array([0.3, -0.1, 0.05])
     dt, n_c = 0.01, 50
     t_c = n_c * dt

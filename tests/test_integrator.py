@@ -4,12 +4,12 @@ import pytest
 from scipy.optimize import brentq
 
 from flowfields.dataset import in_memory_dataset
-from saltation.bed import bed_parameters
-from saltation import history
-from saltation.config import load_case
-from saltation.forces import make_coefficients, yen_drag_coefficient
-from saltation.integrator import NOT_FINITE, advance, make_state, make_workspace
-from saltation.simulation import Simulation, SimulationError, run
+from saltation.bed.virtual import bed_parameters
+from saltation.case.schema import load_case
+from saltation.engine.simulation import Simulation, SimulationError, run
+from saltation.flight.spheres import advance, make_state, make_workspace
+from saltation.physics import history
+from saltation.physics.forces import make_coefficients, yen_drag_coefficient
 
 
 def uniform_flow(u=(0.0, 0.0, 0.0), y_top=1e6):
@@ -100,7 +100,7 @@ def test_no_grain_ends_below_the_bed_and_jumps_are_recorded(tmp_path):
     assert len(jumps) > 40
     assert (jumps["duration"] > 0).all() and (jumps["height"] >= 0).all()
     np.testing.assert_allclose(jumps["velocity"], jumps["length"] / jumps["duration"])
-    # every jump ends at a bed contact; contacts within one contact episode (jumps.py) end none
+    # every jump ends at a bed contact; contacts within one contact episode (bed/jumps.py) end none
     bed = res.summary["collisions"]["bed"]
     assert len(jumps) <= bed and len(jumps) > 0.8 * bed
     assert jumps["duration"].min() >= res.summary["dt_particle"]
@@ -119,8 +119,8 @@ def test_same_seed_and_threads_reproduce_a_run_bit_for_bit(tmp_path):
 def test_nan_stops_the_run_naming_particle_step_and_state(tmp_path, monkeypatch):
     import json
 
-    import saltation.initial as ini
-    from saltation.config import resolve_domain
+    import saltation.grains.initial as ini
+    from saltation.case.schema import resolve_domain
 
     case = resolve_domain(load_case("cases/loglaw.toml", {"run.n_particles": 5, "run.duration": 0.2, "output.vtk": False}))
     y = np.geomspace(0.05, 2e4, 100)
@@ -162,9 +162,9 @@ def test_spin_law_off_keeps_the_spin_and_the_velocity_only_sample_moves_the_grai
 
 
 def test_spin_key_reaches_the_kernel(tmp_path):
-    from saltation.config import resolve_domain
-    from saltation.forces import ON_SPIN
-    from saltation.simulation import _les_box_m, open_flow
+    from saltation.case.schema import resolve_domain
+    from saltation.engine.simulation import _les_box_m, open_flow
+    from saltation.physics.forces import ON_SPIN
 
     assert load_case("cases/default.toml").forces.spin is True
     for value in (True, False):

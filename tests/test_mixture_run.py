@@ -1,5 +1,5 @@
 """Saltation runs of bonded-sphere grains through saltation.run (issue 6 item 5):
-run_clusters.py, the particle.shape keys, and the transport rate with Ackers–White."""
+engine/composites.py, the particle.shape keys, and the transport rate with Ackers–White."""
 import math
 
 import numpy as np
@@ -7,9 +7,9 @@ import pandas as pd
 import pytest
 
 from saltation.analysis.transport import ackers_white, einstein_number, transport_rate
-from saltation.config import CaseError, load_case
-from saltation.simulation import Simulation, open_flow, resolve_domain, _les_box_m, run
-from saltation.shapes import CLASSES
+from saltation.case.schema import CaseError, load_case
+from saltation.engine.simulation import Simulation, _les_box_m, open_flow, resolve_domain, run
+from saltation.grains.shapes import CLASSES
 
 D = 0.69e-3
 TRACK_COLS = ["x", "y", "z", "u", "v", "w", "spin_x", "spin_y", "spin_z"]
@@ -109,7 +109,7 @@ def test_hard_contacts_are_refused_for_composites(tmp_path):
 
 
 def test_fractions_and_shape_round_trip_through_the_case_file(tmp_path):
-    from saltation.config import dump_toml, loads_case
+    from saltation.case.schema import dump_toml, loads_case
 
     c = load_case(tiny(), {"particle.shape": "mixture", "particle.fractions": {"disk": 0.25, "equant": 0.75}})
     assert c.particle.shape_fractions == {"disk": 0.25, "equant": 0.75}

@@ -17,11 +17,11 @@ def _module(name: str) -> Path:
 
 
 def test_closure_follows_imports_transitively_and_stops_at_the_packages():
-    stepping = set(nc.module_closure(_module("saltation.stepping")))
-    for dep in ("saltation.integrator", "saltation.forces", "saltation.history", "flowfields.sampler"):
+    stepping = set(nc.module_closure(_module("saltation.engine.stepping")))
+    for dep in ("saltation.flight.spheres", "saltation.physics.forces", "saltation.physics.history", "flowfields.sampler"):
         assert _module(dep) in stepping, dep  # direct and indirect imports
     assert _module("saltation.cli") not in stepping
-    assert _module("saltation.config") not in stepping
+    assert _module("saltation.case.schema") not in stepping
     assert all(p.is_relative_to(ROOT) for p in stepping)
 
 
@@ -30,7 +30,7 @@ def test_an_edit_changes_the_stamps_of_the_modules_that_import_it_and_no_others(
         shutil.copytree(ROOT / pkg, tmp_path / pkg, ignore=shutil.ignore_patterns("data", "__pycache__"))
     kernels = [p.relative_to(ROOT) for p in nc.kernel_sources(ROOT)]
     before = {k: nc.closure_stamp(tmp_path / k, tmp_path) for k in kernels}
-    edited = Path("saltation/cluster_contacts.py")  # composites only
+    edited = Path("saltation/contacts/composites.py")  # composites only
     with open(tmp_path / edited, "a") as f:
         f.write("\n# an edit\n")
     after = {k: nc.closure_stamp(tmp_path / k, tmp_path) for k in kernels}
@@ -38,7 +38,7 @@ def test_an_edit_changes_the_stamps_of_the_modules_that_import_it_and_no_others(
     assert edited in changed
     importers = {k for k in kernels if tmp_path / edited in nc.module_closure(tmp_path / k, tmp_path)}
     assert changed == importers
-    for sphere_kernel in ("saltation/stepping.py", "saltation/collide.py", "saltation/integrator.py",
+    for sphere_kernel in ("saltation/engine/stepping.py", "saltation/contacts/phase.py", "saltation/flight/spheres.py",
                           "flowfields/sampler.py"):
         assert Path(sphere_kernel) not in changed  # a sphere run loads everything from the cache
     # an edit to the command line changes no stamp at all
@@ -53,7 +53,7 @@ def test_numba_uses_the_closure_stamp_for_our_kernels():
     impl = getattr(caching, "CacheImpl", None) or caching._CacheImpl
     locator = impl._locator_classes[0]
     assert locator.__name__ == "ClosureStampedLocator"
-    from saltation import forces
+    from saltation.physics import forces
 
     py_file = forces.__file__
     loc = locator.from_function(forces.make_coefficients, py_file)

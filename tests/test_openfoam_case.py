@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from flowfields import openfoam as of
-from flowfields.generate import ChannelParams, generate, run_channel_les
+from flowfields.generate import ChannelParams, run_channel_les
 
 needs_openfoam = pytest.mark.skipif(
     shutil.which("pimpleFoam") is None or shutil.which("blockMesh") is None
@@ -146,7 +146,7 @@ def test_velocity_field_roundtrip(tmp_path):
     assert np.allclose(back, U, rtol=1e-8)
     text = path.read_text()
     assert re.search(r"bottomWall\s*{\s*type\s+noSlip;", text)
-    for a, b in of.CYCLIC_PAIRS:
+    for a, _b in of.CYCLIC_PAIRS:
         assert re.search(rf"{a}\s*{{\s*type\s+cyclic;", text)
 
 

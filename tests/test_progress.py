@@ -3,7 +3,7 @@ import io
 import sys
 import time
 
-from saltation.progress import LOG_INTERVAL, progress_bar
+from saltation.io.progress import LOG_INTERVAL, progress_bar
 
 
 class _Tty(io.StringIO):
@@ -42,7 +42,7 @@ def test_compile_notice_speaks_once_per_cache_and_quotes_the_wait(tmp_path, monk
     import numba
 
     from flowfields._numba_cache import kernel_version
-    from saltation import progress
+    from saltation.io import progress
 
     version = kernel_version()
     monkeypatch.setattr(numba.config, "CACHE_DIR", str(tmp_path / "cache"))

@@ -1,4 +1,4 @@
-"""Published saltation regressions (saltation/regressions.py, docs/references.md).
+"""Published saltation regressions (saltation/analysis/regressions.py, docs/references.md).
 
 Expected numbers were computed by hand (awk, independently of the module) from the
 printed equations at the first Niño & García stage: d = 0.69 mm quartz in water,
@@ -11,7 +11,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from saltation import regressions as reg
+from saltation.analysis import regressions as reg
 
 D, R, G, NU, TC = 0.69e-3, 1.65, 9.81, 1.0e-6, 0.032
 TS = 1.79 * TC

@@ -12,7 +12,7 @@ import pytest
 from flowfields import rough_bed as rb
 from flowfields.dataset import DatasetError, in_memory_dataset, open_dataset
 from flowfields.generate import ChannelParams, generate
-from saltation.flow import BED_TOLERANCE, BedMismatch, check_bed
+from saltation.physics.fluid import BED_TOLERANCE, BedMismatch, check_bed
 
 needs_openfoam = pytest.mark.skipif(
     shutil.which("pimpleFoam") is None or shutil.which("blockMesh") is None or shutil.which("topoSet") is None,
@@ -67,7 +67,6 @@ def test_bad_rough_bed_parameters_name_the_parameter(kwargs, name):
 # ---------------------------------------------------------------- the OpenFOAM case
 def test_rough_case_writes_bed_blocks_zones_and_ergun_drag(tmp_path):
     from flowfields import openfoam as of
-    from flowfields.generate import write_case
 
     p = ChannelParams(bed="porous", nx=6, ny=8, nz=4, re_tau=100, first_cell_yplus=1.0, ny_bed=6, initial="perturb")
     of.write_channel_case(tmp_path, lx=p.lx, lz=p.lz, h=p.h, nx=p.nx, ny=p.ny, nz=p.nz, expansion=p.expansion,
@@ -171,7 +170,7 @@ def test_rough_sampler_interpolates_across_the_bed_top_and_into_the_layer():
 
 
 def test_a_grain_dipping_below_the_bed_top_sees_the_pore_flow_for_its_lift():
-    from saltation.flow import fluid_at_grain
+    from saltation.physics.fluid import fluid_at_grain
 
     ds = _rough_dataset(lambda X, Y, Z: np.stack([np.where(Y > 0, 3.0 + 0.4 * Y, 0.3 * (Y + 10.0) / 10.0), 0 * X,
                                                   0 * X], axis=-1))
@@ -217,7 +216,7 @@ def test_a_smooth_dataset_used_as_rough_is_refused():
 
 def test_a_case_over_the_smooth_dataset_declared_rough_fails_before_any_work(tmp_path):
     import saltation
-    from saltation.config import CaseError
+    from saltation.case.schema import CaseError
 
     case = {"particle": {"diameter": 0.69e-3}, "fluid": {},
             "flow": {"source": "les", "dataset": "channel395", "tau_ratio": 1.79, "bed": "rough"},
@@ -250,7 +249,7 @@ def test_a_diverged_solver_log_is_found_with_its_line(tmp_path):
 
 
 def test_a_sweep_file_keeps_a_shipped_dataset_name(tmp_path):
-    from saltation.sweep import load_sweep
+    from saltation.studies.sweep import load_sweep
 
     f = tmp_path / "s.toml"
     f.write_text('[particle]\ndiameter = 0.69e-3\n[flow]\nsource = "les"\ndataset = "channel395"\n'

@@ -1,7 +1,8 @@
 """Interpolation, gradient, periodicity, time looping and sublayer of the flow sampler."""
 import numpy as np
 import pytest
-from hypothesis import given, settings, strategies as st
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from flowfields.dataset import in_memory_dataset
 

@@ -3,7 +3,8 @@ import math
 
 import pytest
 
-from saltation import settling, shapes
+from saltation.grains import shapes
+from saltation.studies import settling
 
 
 def test_haider_levenspiel_sphere_limit_and_shape_effect():

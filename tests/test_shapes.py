@@ -1,11 +1,11 @@
-"""Bonded-sphere grains (saltation.shapes): classification, construction, mass
+"""Bonded-sphere grains (saltation.grains.shapes): classification, construction, mass
 properties, mixtures, bad input, a priori comparison with ellipsoid and cylinder."""
 import math
 
 import numpy as np
 import pytest
 
-from saltation import shapes
+from saltation.grains import shapes
 
 
 @pytest.mark.parametrize("axes, cls", [

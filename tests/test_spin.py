@@ -1,11 +1,11 @@
-"""Spin equation (saltation/spin.py, SPEC §2)."""
+"""Spin equation (saltation/physics/spin.py, SPEC §2)."""
 
 import math
 
 import numpy as np
 import pytest
 
-from saltation import spin as S
+from saltation.physics import spin as S
 
 
 def test_stokes_row_is_stokes_torque():

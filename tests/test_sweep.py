@@ -8,10 +8,10 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
+from saltation.case.schema import load_case, resolve_domain
 from saltation.cli import main
-from saltation.simulation import CHECKPOINT, RunInterrupted, Simulation, _les_box_m, open_flow
-from saltation.config import load_case, resolve_domain
-from saltation.sweep import SweepError, case_name, load_sweep, plan_workers, run_sweep, sweep_key
+from saltation.engine.simulation import CHECKPOINT, RunInterrupted, Simulation, open_flow
+from saltation.studies.sweep import SweepError, case_name, load_sweep, plan_workers, run_sweep, sweep_key
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -19,8 +19,15 @@ import pyarrow.parquet as pq
 import pytest
 
 import saltation
-from saltation.run_directory import LOCK, RunDirectoryError
-from saltation.simulation import CHECKPOINT, CHECKPOINT_FRACTION, RunInterrupted, Simulation, SimulationError, run
+from saltation.engine.simulation import (
+    CHECKPOINT,
+    CHECKPOINT_FRACTION,
+    RunInterrupted,
+    Simulation,
+    SimulationError,
+    run,
+)
+from saltation.io.run_directory import LOCK, RunDirectoryError
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -40,8 +47,8 @@ def case(n=24, duration=0.4, **extra):
 
 
 def simulation(c, out, **kw):
-    from saltation.config import load_case, resolve_domain
-    from saltation.simulation import open_flow
+    from saltation.case.schema import load_case, resolve_domain
+    from saltation.engine.simulation import open_flow
 
     cc = resolve_domain(load_case(c))
     return Simulation(cc, open_flow(cc), Path(out), progress=False, **kw)
@@ -67,7 +74,7 @@ def test_diffusion_is_reachable_after_a_plain_import():
 # --------------------------------------------------------------------------- 2. what a jump is
 def test_a_grain_resting_on_the_bed_makes_no_micro_jumps(tmp_path):
     """A grain released with its bottom on the virtual bed in still water chatters on the
-    bed every few steps (weight in, rebound out): before jumps.py each bounce was a
+    bed every few steps (weight in, rebound out): before bed/jumps.py each bounce was a
     "jump" (83 in 7 d/u*, 0.001–0.007 d high, 2–5 steps long). It is one bed-contact
     episode: no jump at all."""
     res = run(case(n=1, duration=0.2, **{"flow.source": "still", "run.release_height": 0.5,
@@ -80,8 +87,8 @@ def test_a_grain_resting_on_the_bed_makes_no_micro_jumps(tmp_path):
 
 @pytest.mark.parametrize("bed, contacts", [("virtual", "off"), ("virtual", "soft"), ("packed", "soft")])
 def test_no_recorded_jump_is_shorter_than_a_step_or_lower_than_a_steps_fall(tmp_path, bed, contacts):
-    from saltation.config import load_case
-    from saltation.forces import ALPHA, TAU_STAR, make_coefficients
+    from saltation.case.schema import load_case
+    from saltation.physics.forces import ALPHA, TAU_STAR, make_coefficients
 
     c = case(n=60, duration=0.8, **{"bed.model": bed, "collisions.model": contacts})
     res = run(c, out=tmp_path / "r", progress=False)

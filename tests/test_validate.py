@@ -5,8 +5,9 @@ import math
 import pandas as pd
 import pytest
 
-from saltation import regressions, validate
-from saltation.config import load_case
+from saltation.analysis import regressions
+from saltation.case.schema import load_case
+from saltation.studies import validate
 
 
 def test_compare_gives_a_ratio_per_regression_and_the_widened_envelope():
@@ -34,7 +35,7 @@ def test_every_case_and_flow_is_consistent_with_its_references():
         assert vr["U_vanrijn"] == pytest.approx(refs.loc["van Rijn 1984", "U_over_ustar"])
     assert validate.DEFAULT_FLOW == next(iter(validate.FLOWS))
     # every sensitivity row is a valid override set of the cases
-    for label, over in validate.SENSITIVITY:
+    for _label, over in validate.SENSITIVITY:
         load_case(validate.cases_dir() / validate.CASES[1.79], over)
 
 

@@ -61,9 +61,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from ..statistics import DISCARDED_JUMPS  # paper §3.2, as the run's statistics
-from .variance import (VARIANCE_FILE, AnalysisError, VarianceAccumulator, make_plan, read_sums,
-                       variance_curves)
+from ..engine.statistics import DISCARDED_JUMPS  # paper §3.2, as the run's statistics
+from .variance import VARIANCE_FILE, AnalysisError, VarianceAccumulator, make_plan, read_sums, variance_curves
 
 __all__ = ["exponents", "DiffusionResult", "AnalysisError", "crossover", "jump_duration_from_tracks", "read_tracks_file",
            "sums_from_tracks"]

@@ -30,7 +30,6 @@ from __future__ import annotations
 
 import base64
 import html
-import io
 import json
 import math
 from pathlib import Path
@@ -234,8 +233,7 @@ def fig_run_costs(summary: dict, path: Path):
 
 
 def _by_tau(df):
-    for tau, g in df.sort_values("concentration_pct").groupby("tau_ratio"):
-        yield tau, g
+    yield from df.sort_values("concentration_pct").groupby("tau_ratio")
 
 
 def fig_jumps_vs_concentration(df: pd.DataFrame, path: Path):
@@ -537,7 +535,7 @@ def analyze_run(run_dir: Path, out: Path, vdir=None) -> dict:
     parts = [_p(head), _table(jt)]
     if len(jumps):
         parts.append(_img(fig_jump_distributions(jumps, out / "jump_distributions.png")))
-    sections.append(("Jump statistics (first %d jumps of each grain dropped)" % DISCARDED_JUMPS, parts))
+    sections.append((f"Jump statistics (first {DISCARDED_JUMPS} jumps of each grain dropped)", parts))
 
     res, problems = diffusion_of(run_dir)
     parts = _diffusion_parts(res, problems, out)

@@ -55,7 +55,7 @@ import math
 import numpy as np
 import pandas as pd
 
-from ..config import GRAVITY
+from ..case.schema import GRAVITY
 
 __all__ = ["ackers_white", "bulk_velocity_plus", "transport_rate", "einstein_number"]
 

@@ -240,7 +240,7 @@ class RunVariance:
                 "memory_bytes": self.acc.memory_bytes}
 
     def state_arrays(self) -> dict:
-        """The sums so far, for the run's checkpoint (simulation.py)."""
+        """The sums so far, for the run's checkpoint (engine/simulation.py)."""
         return {"ref": self.acc.ref, "sums": self.acc.sums, "last_sample": np.int64(self.acc.last_sample)}
 
     def restore(self, arrays: dict, step: int) -> None:

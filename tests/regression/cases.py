@@ -8,7 +8,6 @@ and every number of summary.json except wall-clock timings); the reference is
 from __future__ import annotations
 
 import json
-import math
 from pathlib import Path
 
 import numpy as np
@@ -25,7 +24,7 @@ def _case(shape="sphere", bed="virtual", contacts="off", basset=True, source="le
     if dense:  # a small box at the paper's densest concentrations: grains in contact, sub-stepped
         if shape == "sphere":
             run.update({"concentration": 0.0394, "domain": [0.008, 0.004, 0.028]})
-        else:  # composite contacts need a box ≥ 7.84 Dn wide (cluster_contacts.py)
+        else:  # composite contacts need a box ≥ 7.84 Dn wide (contacts/composites.py)
             run.update({"concentration": 0.0207, "domain": [0.012, 0.006, 0.028]})
     else:
         run["n_particles"] = 16
@@ -101,8 +100,8 @@ def run_case(name: str, out: Path) -> dict[str, np.ndarray]:
     fingerprint."""
     import pytest
 
-    from saltation.config import load_case
-    from saltation.simulation import RunInterrupted, Simulation, _les_box_m, open_flow, resolve_domain, run
+    from saltation.case.schema import load_case
+    from saltation.engine.simulation import RunInterrupted, Simulation, _les_box_m, open_flow, resolve_domain, run
 
     case, stop = CASES[name]
     out = Path(out)

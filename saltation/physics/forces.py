@@ -15,8 +15,8 @@ added mass             a_am = α Cm (∂u_f/∂t + (u_p·∇) u_f)
 fluid acceleration     a_fa = α (∂u_f/∂t + (u_f·∇) u_f)
 =====================  =====================================================
 
-with α = 1/(1 + R + Cm).  The Basset history term lives in ``history.py`` and
-the spin equation in ``spin.py``.
+with α = 1/(1 + R + Cm).  The Basset history term lives in ``physics/history.py`` and
+the spin equation in ``physics/spin.py``.
 
 Conventions: ``grad_uf[i, j] = ∂u_i/∂x_j``; all vectors are float64 arrays of
 length 3; vorticity and spin are in units u*/d.  The caller evaluates the fluid
@@ -48,7 +48,7 @@ C_OMEGA = 6          # Magnus coefficient C_Ω
 R_SUBMERGED = 7      # submerged specific gravity R = ρp/ρ - 1
 SIN_SLOPE = 8        # sin θ (precomputed)
 COS_SLOPE = 9        # cos θ (precomputed)
-BASSET_PREFACTOR = 10  # 9α/√(π Re*), used by history.py (a_bs = -prefactor · I)
+BASSET_PREFACTOR = 10  # 9α/√(π Re*), used by physics/history.py (a_bs = -prefactor · I)
 ON_WEIGHT = 11
 ON_DRAG = 12
 ON_LIFT = 13
@@ -56,7 +56,7 @@ ON_MAGNUS = 14
 ON_ADDED_MASS = 15
 ON_FLUID_ACC = 16
 ON_BASSET = 17       # not used here; carried for the integrator's convenience
-ON_SPIN = 18         # free-flight spin law (spin.py); not used here
+ON_SPIN = 18         # free-flight spin law (physics/spin.py); not used here
 N_COEF = 19
 
 # ---------------------------------------------------------------- term rows
@@ -88,7 +88,7 @@ def make_coefficients(*, tau_star, R=1.65, Rp=None, re_star=None, slope=0.0,
     slope : bed slope θ in radians.
     Cm, C_L, C_Omega : added-mass, lift and Magnus coefficients.
     weight … basset : on/off switches of the terms; spin: the free-flight spin law
-        (spin.py) — off, the spin changes only at contacts.
+        (physics/spin.py) — off, the spin changes only at contacts.
     """
     if tau_star is None or not tau_star > 0:
         raise ValueError(f"tau_star must be > 0, got {tau_star!r}")
@@ -194,7 +194,7 @@ def _add_drag(up, uf, coef, out):
 @njit(cache=True, _nrt=False, inline="always")
 def weight_and_drag(coef, up0, up1, up2, uf0, uf1, uf2):
     """``fluid_acceleration`` when weight and drag are the only terms switched on, on
-    scalars (integrator.py's fast path): the same operations in the same order."""
+    scalars (flight/spheres.py's fast path): the same operations in the same order."""
     a0 = 0.0
     a1 = 0.0
     a2 = 0.0

@@ -1,10 +1,10 @@
 """The hydrodynamic step as an operator split, with its cost accounting (SPEC §5, §6).
 
 Each step of Δt: (1) free flight of every grain (RK4 with the fluid forces, history
-closure; integrator.free_flight_particles), (2) grain–grain contacts (collide.py: soft
+closure; integrator.free_flight_particles), (2) grain–grain contacts (contacts/phase.py: soft
 spheres sub-stepped along the free-flight paths, or binary hard-sphere impulses), (3) the
-bed (virtual bed: integrator._bed_check_body, per chunk of grains; packed bed: packed_bed.py). The order is
-fixed; collide.py explains the split. Every phase is one parallel pass over the grains,
+bed (virtual bed: integrator._bed_check_body, per chunk of grains; packed bed: bed/packed.py). The order is
+fixed; contacts/phase.py explains the split. Every phase is one parallel pass over the grains,
 and the wall time of each is measured around it (``time.perf_counter`` through Numba's
 object mode, ~0.6 µs per reading, four readings per step) and summed into
 ``timers = [free_flight_s, particle_collisions_s, bed_s]``. "Bed" is therefore the
@@ -13,7 +13,7 @@ collisions" the whole contact phase (neighbour-list upkeep, engagement test,
 sub-steps), "free flight" the RK4 pass.
 
 :class:`Stepper` holds what the phases need besides the grain state (contact list,
-contact-phase work arrays, packed bed, timers) and runs chunks of steps for simulation.py.
+contact-phase work arrays, packed bed, timers) and runs chunks of steps for engine/simulation.py.
 :meth:`Stepper.state_arrays` / :meth:`Stepper.load_state_arrays` give the arrays a
 checkpoint must keep to continue bit for bit (contact history, counters, bed contacts).
 """
@@ -25,12 +25,18 @@ import time
 import numpy as np
 from numba import njit, objmode, prange
 
-from .collide import (MERGED_PASSES, empty_substep_set, hard_contact_phase, make_bed_context, make_contact_phase,
-                      soft_contact_phase)
-from .contacts import contact_model_from_case, make_contact_list, rebuild
-from .jumps import BED_MIN_JUMP_DURATION, BED_MIN_JUMP_HEIGHT
-from .integrator import CHUNK, OK, NOT_FINITE, _bed_check_body, free_flight_particles  # the inline bed body
-from .packed_bed import make_packed_bed, packed_bed_check_particle
+from ..bed.jumps import BED_MIN_JUMP_DURATION, BED_MIN_JUMP_HEIGHT
+from ..bed.packed import make_packed_bed, packed_bed_check_particle
+from ..contacts.pairs import contact_model_from_case, make_contact_list, rebuild
+from ..contacts.phase import (
+    MERGED_PASSES,
+    empty_substep_set,
+    hard_contact_phase,
+    make_bed_context,
+    make_contact_phase,
+    soft_contact_phase,
+)
+from ..flight.spheres import CHUNK, OK, _bed_check_body, free_flight_particles  # the inline bed body
 
 CONTACTS_OFF, CONTACTS_SOFT, CONTACTS_HARD = 0, 1, 2
 BED_VIRTUAL, BED_PACKED = 0, 1
@@ -127,12 +133,12 @@ def advance_split(f, coef, bed, seed, st, w, hc, t0, dt, n_steps, top, step0, co
 
 def default_skin(dt_particle: float) -> float:
     """Verlet skin (d): twice the distance a grain at SKIN_SPEED u* covers in a step, ×1.2,
-    at least 0.1 d (collide.py: the list must hold for a whole step)."""
+    at least 0.1 d (contacts/phase.py: the list must hold for a whole step)."""
     return max(0.1, 2.0 * 1.2 * SKIN_SPEED * dt_particle)
 
 
 class Stepper:
-    """Contact and bed state of a run, and the chunked stepping (simulation.py calls
+    """Contact and bed state of a run, and the chunked stepping (engine/simulation.py calls
     ``advance``). Particle units throughout (d, u*, d/u*)."""
 
     def __init__(self, case, n: int, domain_d, top_d: float, coef, bed, seed: int, hist_coef, dt: float):
@@ -174,7 +180,7 @@ class Stepper:
     def start(self, pos):
         """Build the contact list on the initial positions (N, 3) (particle units). Soft
         contacts: cells wide enough for SKIN_GROWTH × the skin, so that the contact phase
-        can widen the skin for a fast grain without new cells (collide.py)."""
+        can widen the skin for a fast grain without new cells (contacts/phase.py)."""
         if self.contacts_mode == CONTACTS_HARD:
             self.cl = make_contact_list(pos, self.box, (True, False, True), 1.0, 0.0)
         elif self.contacts_mode == CONTACTS_SOFT:
@@ -254,7 +260,7 @@ class Stepper:
                 "phases_redone_merged": int(ph.counters[7]),
                 "phases_redone_unblocked": int(ph.counters[6]),
                 "blocks_are": "groups of grains sub-stepped together, out of touch with the other blocks "
-                              "(collide.py, \"Blocks\"); when two blocks' grains came near each other the "
+                              "(contacts/phase.py, \"Blocks\"); when two blocks' grains came near each other the "
                               f"phase is redone with their groups joined (merged), after {MERGED_PASSES} such "
                               "passes as one block (unblocked)",
             }
@@ -264,7 +270,7 @@ class Stepper:
         ff, pc, bd = (float(x) for x in self.timers)
         return {"free_flight_s": ff, "particle_collisions_s": pc, "bed_s": bd,
                 "split_is": "wall time of each phase's pass over the grains, summed over steps "
-                            "(stepping.py)"}
+                            "(engine/stepping.py)"}
 
     # ---------------------------------------------------------------- checkpoints
     def state_arrays(self) -> dict:
@@ -280,12 +286,12 @@ class Stepper:
             # the bed as a soft contact of sub-stepped grains: its springs and contact slots
             # carry over from step to step (collide.BedContext)
             out.update({"bc_" + k: getattr(self.bc, k) for k in BED_CONTACT_STATE})
-            out["cl_skin"] = np.array([cl.skin])  # widened for fast grains (collide.py)
+            out["cl_skin"] = np.array([cl.skin])  # widened for fast grains (contacts/phase.py)
         return out
 
     def load_state_arrays(self, arrays: dict, pos) -> None:
         """Restore ``state_arrays()`` (after ``start``); cells are rebuilt from ref_pos."""
-        from .cells import build_cells
+        from ..contacts.cells import build_cells
 
         self.last_contact[:] = arrays["last_contact"]
         self.timers[:] = arrays["timers"]

@@ -64,7 +64,7 @@ summing many forces). ``tests/test_contacts.py`` checks both.
 
 Neighbour list with skin (``ContactList``)
 ------------------------------------------
-Cells (cells.py) of at least ``cutoff = d + skin``; a full neighbour list of capacity K
+Cells (contacts/cells.py) of at least ``cutoff = d + skin``; a full neighbour list of capacity K
 per grain holds every j within the cutoff together with its contact history (``shear``,
 ``touch``). It is rebuilt when some grain has moved more than skin/2 since the last
 build (LAMMPS ``neigh_modify delay 0 every 1 check yes``), and the history is carried
@@ -81,7 +81,7 @@ How an integrator calls it (sub-stepping)
 -----------------------------------------
 Set up once: ``model = contact_model_from_case(case)``; ``cl = make_contact_list(pos,
 (Lx, Ly, Lz), (True, False, True), 1.0, skin)`` with x, z periodic (positions may stay
-unwrapped) and y bounded (clamped cells, see cells.py); ``force``, ``torque`` = zeros
+unwrapped) and y bounded (clamped cells, see contacts/cells.py); ``force``, ``torque`` = zeros
 (N, 3) kept with ``cl``. Then per contact sub-step of length ``dt_c``::
 
     cl = update_neighbours(pos, cl)      # exact skin/2 check; rebuild + history transfer
@@ -255,7 +255,7 @@ class ContactList(NamedTuple):
 def make_contact_list(pos, box, periodic=(True, False, True), diameter=1.0, skin=0.0,
                       capacity=16) -> ContactList:
     """Cells, neighbour list and empty contact history for grains at ``pos`` (N, 3) in a
-    box (Lx, Ly, Lz) (module docstring of cells.py for periodic and bounded axes)."""
+    box (Lx, Ly, Lz) (module docstring of contacts/cells.py for periodic and bounded axes)."""
     pos = np.asarray(pos, dtype=np.float64)
     n = len(pos)
     cutoff = float(diameter) + float(skin)

@@ -10,8 +10,8 @@ One step of one grain:
    (``history.history_end_step``: second order and stable for any P√Δt);
 3. if the grain's centre crossed y = 1/2 (its bottom reached the bed top) while
    descending: locate the contact by linear interpolation within the step, rebound on a
-   virtual bed grain (bed.py), move on with the new velocity for the rest of the step,
-   close the jump and open the next one; the Basset history restarts (history.py
+   virtual bed grain (bed/virtual.py), move on with the new velocity for the rest of the step,
+   close the jump and open the next one; the Basset history restarts (physics/history.py
    explains why) from the next step's first fluid sample.
 
 State is a structure of arrays (``GrainState``); per-particle scratch space is
@@ -26,15 +26,32 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit, prange
 
-from . import history
-from .bed import bed_rebound, virtual_bed_normal
-from .flow import fluid_at_grain, gather_at, grain_velocity, locate_grain, same_cell
-from .forces import (BASSET_PREFACTOR, ON_ADDED_MASS, ON_BASSET, ON_FLUID_ACC, ON_LIFT, ON_MAGNUS, ON_SPIN,
-                     R_SUBMERGED, RE_STAR, fluid_acceleration, weight_and_drag)
-from .history import META_COUNT, add_basset_acceleration, history_end_step, history_mark_impact, history_start_step
-from .jumps import BED_MIN_JUMP_DURATION, BED_MIN_JUMP_HEIGHT, close_jump
-from .rng import uniform2
-from .spin import spin_rate
+from ..bed.jumps import BED_MIN_JUMP_DURATION, BED_MIN_JUMP_HEIGHT, close_jump
+from ..bed.virtual import bed_rebound, virtual_bed_normal
+from ..physics import history
+from ..physics.fluid import fluid_at_grain, gather_at, grain_velocity, locate_grain, same_cell
+from ..physics.forces import (
+    BASSET_PREFACTOR,
+    ON_ADDED_MASS,
+    ON_BASSET,
+    ON_FLUID_ACC,
+    ON_LIFT,
+    ON_MAGNUS,
+    ON_SPIN,
+    R_SUBMERGED,
+    RE_STAR,
+    fluid_acceleration,
+    weight_and_drag,
+)
+from ..physics.history import (
+    META_COUNT,
+    add_basset_acceleration,
+    history_end_step,
+    history_mark_impact,
+    history_start_step,
+)
+from ..physics.rng import uniform2
+from ..physics.spin import spin_rate
 
 RADIUS = 0.5  # grain radius in particle units
 
@@ -59,7 +76,7 @@ class GrainState(NamedTuple):
     jump_buf_n: np.ndarray  # (N,) int64
     status: np.ndarray  # (N,) int64
     above_top: np.ndarray  # (N,) int64 steps spent above the stored flow
-    hist_slip: np.ndarray  # (N, N_w+2, 3) Basset window of slip samples (history.py)
+    hist_slip: np.ndarray  # (N, N_w+2, 3) Basset window of slip samples (physics/history.py)
     hist_meta: np.ndarray  # (N, 2) int64 ring-buffer head, samples since reset (0: reset due)
     hist_tail: np.ndarray  # (N, 10, 3) exponential tail modes
     hist_i: np.ndarray  # (N, 3) history integral I_n carried between steps
@@ -268,7 +285,7 @@ def _free_flight_body(f, coef, st, w, hc, p, t, dt):
         basset[i] = 0.0
     if with_basset:
         if st.hist_meta[p, META_COUNT] <= 0:
-            # release, or the step after an impact: the slip step kept, or a restart (history.py)
+            # release, or the step after an impact: the slip step kept, or a restart (physics/history.py)
             slip = w.slip[p]
             for i in range(3):
                 slip[i] = vel[i] - uf[i]
@@ -385,10 +402,10 @@ def _bed_impact(st, w, p, t, dt, y_old, y_new, bed, seed):
     x_hit = st.pos[p, 0] - back * st.vel[p, 0]
     z_hit = st.pos[p, 2] - back * st.vel[p, 2]
     t_hit = t + frac * dt
-    # close the jump (SPEC §6, jumps.py): length, height of the grain bottom above the bed top
+    # close the jump (SPEC §6, bed/jumps.py): length, height of the grain bottom above the bed top
     close_jump(st, p, st.jump_t0[p], x_hit - st.jump_x0[p], st.jump_ymax[p] - RADIUS, t_hit,
                bed[BED_MIN_JUMP_DURATION], bed[BED_MIN_JUMP_HEIGHT])
-    # rebound on a randomly tilted bed grain (bed.py), then fly on for the rest of the step
+    # rebound on a randomly tilted bed grain (bed/virtual.py), then fly on for the rest of the step
     n = w.normal[p]
     c = st.impacts[p]
     xi1, xi2 = uniform2(seed, p, c)
@@ -403,7 +420,7 @@ def _bed_impact(st, w, p, t, dt, y_old, y_new, bed, seed):
     st.jump_x0[p] = x_hit
     st.jump_ymax[p] = st.pos[p, 1]
     st.fresh[p] = 0  # moved: the fluid must be sampled again
-    history_mark_impact(st.hist_meta[p])  # the next step takes the slip step (history.py)
+    history_mark_impact(st.hist_meta[p])  # the next step takes the slip step (physics/history.py)
 
 
 @njit(cache=True, parallel=True, error_model="numpy")

@@ -1,5 +1,5 @@
 """Grain–grain contacts inside the hydrodynamic step (SPEC §5): the contact phase of the
-run loop's operator split (stepping.py).
+run loop's operator split (engine/stepping.py).
 
 Operator split
 --------------
@@ -17,7 +17,7 @@ the step is the cubic Hermite interpolant H(s), s = t/Δt ∈ [0, 1], through (x
 (x₁, u₁) (spin: linear between ϖ₀ and ϖ₁); during the contact phase a grain is at
 ``H(s) + δx`` with velocity ``H'(s)/Δt + δu`` and spin ``ϖ(s) + δϖ``, and the deviations
 obey ``dδu/dt = F_c/m``, ``dδx/dt = δu``, ``dδϖ/dt = T_c/I`` (F_c, T_c the contact force and
-torque of contacts.py's LAMMPS-exact ``gran/hooke/history`` model, m = 1 the grain mass,
+torque of contacts/pairs.py's LAMMPS-exact ``gran/hooke/history`` model, m = 1 the grain mass,
 I = 0.1) — integrated by velocity Verlet (LAMMPS ``fix nve/sphere`` order: half kick,
 drift, forces at the half-kicked velocities, half kick). Hence:
 
@@ -28,7 +28,7 @@ drift, forces at the half-kicked velocities, half kick). Hence:
   on top; first-order splitting error O(Δt · |Δu_contact| · ∂a_fluid/∂u).
 
 After the phase a grain that had a contact gets the fluid re-sampled at its new position
-and its **Basset history restarted**, exactly as at a bed impact (history.py): a contact
+and its **Basset history restarted**, exactly as at a bed impact (physics/history.py): a contact
 changes the velocity by a finite amount in ~10⁻³ d/u*, which the Boussinesq–Basset
 kernel (valid for smooth acceleration of a lone sphere) would turn into a spurious
 long-lived force. A grain in a lasting contact (resting on another) restarts its history
@@ -65,7 +65,7 @@ with fixed bed spheres of diameter d (the pair model with a fixed partner: m_eff
 correction after the phase (the hard rebound moves a grain by up to ~|Δu| Δt ≈ 0.1 d)
 would put it into a neighbour it is touching, and the stiff spring would turn that
 overlap into a spurious kick (½ k_n δ² at δ = 0.02 d is a relative speed of ~20 u*).
-Packed bed: the real bed spheres (packed_bed.py), found through its cells. Virtual bed:
+Packed bed: the real bed spheres (bed/packed.py), found through its cells. Virtual bed:
 when the grain's bottom first goes below the bed top, a virtual bed sphere is placed
 under it along a random normal (bed.virtual_bed_normal, the same counter-based draw as
 the hard virtual bed) and kept until the contact ends. The first bed contact after at
@@ -165,12 +165,12 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit, prange
 
-from .bed import virtual_bed_normal
+from ..bed.jumps import close_jump
+from ..bed.virtual import virtual_bed_normal
+from ..physics.history import history_mark_impact
+from ..physics.rng import uniform2
 from .cells import build_cells, min_image, stencil_cells
-from .contacts import LEVER_RADIUS, ContactList, hard_sphere_collisions, normal_damping, rebuild
-from .history import history_mark_impact
-from .jumps import close_jump
-from .rng import uniform2
+from .pairs import LEVER_RADIUS, ContactList, hard_sphere_collisions, normal_damping, rebuild
 
 __all__ = ["ContactPhase", "SubstepSet", "BedContext", "make_contact_phase", "make_bed_context", "soft_contact_phase",
            "empty_substep_set",
@@ -183,7 +183,7 @@ GIANT_GROUP = 256  # members: a larger group (a dense layer percolating) is cut 
 GIANT_BLOCK_SLACK = 0.15  # d: those slacks
 GIANT_QUIET_SLACK = 0.02
 MERGED_PASSES = 3  # passes redone with the conflicting groups joined before one that is a single block
-BC_MIN_JUMP_DURATION, BC_MIN_JUMP_HEIGHT = 7, 8  # slots of BedContext.params (jumps.py)
+BC_MIN_JUMP_DURATION, BC_MIN_JUMP_HEIGHT = 7, 8  # slots of BedContext.params (bed/jumps.py)
 BED_SLOTS = 4  # bed spheres one grain can touch at once (3 in a hollow of the packed layer)
 FREE = -1  # an empty bed-contact slot
 VIRTUAL = -2  # a slot holding a virtual bed grain
@@ -212,7 +212,7 @@ class BedContext(NamedTuple):
 def make_bed_context(n, packed: bool, pb, restitution, friction, max_tilt, kn, kt, seed, last_contact,
                      min_jump_duration=0.0, min_jump_height=0.0):
     """BedContext for n grains; pb: a packed_bed.PackedBed (any, when not packed); the
-    jump thresholds as in jumps.py."""
+    jump thresholds as in bed/jumps.py."""
     gamma = normal_damping(restitution, kn, 1.0) if restitution > 0.0 else 2.0 * math.sqrt(kn)
     params = np.array([1.0 if packed else 0.0, restitution, friction, max_tilt, gamma, kn, kt,
                        min_jump_duration, min_jump_height])
@@ -404,12 +404,12 @@ def _state_of(cs, b, s, dt):
 # ----------------------------------------------------------------------------- forces
 # The sub-step kernels allocate nothing and are compiled without reference counting
 # (_nrt=False): field reads of the named tuples otherwise cost atomic increments and
-# decrements in the innermost loops (integrator.py).
+# decrements in the innermost loops (flight/spheres.py).
 
 
 @njit(cache=True, inline="always", error_model="numpy", _nrt=False)
 def _grain_force(a, cs, model, box, per, s, dt, h, update, blk):
-    """Contact force and torque on active member a at sub-step position s (contacts.py's
+    """Contact force and torque on active member a at sub-step position s (contacts/pairs.py's
     gran/hooke/history arithmetic, mirrored exactly so both grains of a pair compute
     negated vectors); h: the sub-step the tangential spring advances by. box, per: the
     contact grid's lengths and periodic flags. A neighbour in another block than ``blk``
@@ -729,7 +729,7 @@ def _reach(x0w, pos, vel, dt, cl, ph):
     n = pos.shape[0]
     box, per, ref = cl.grid.box, cl.grid.periodic, cl.ref_pos
     # arrays unpacked before the parallel loop: Numba 0.68 drops writes made in a prange
-    # body through a named tuple's arrays (integrator.py)
+    # body through a named tuple's arrays (flight/spheres.py)
     active, reach, worst = ph.active, ph.reach, ph.ref_bound
     for i in prange(n):
         active[i] = 0
@@ -751,7 +751,7 @@ def _reach(x0w, pos, vel, dt, cl, ph):
         bulge = 0.25 * dt * (math.sqrt(b0) + math.sqrt(b1))
         reach[i] = math.sqrt(ch) + bulge
         worst[i] = math.sqrt(max(r0, r1)) + bulge
-    return worst.max() if n > 0 else 0.0  # noqa: the reduction reads the filled array
+    return worst.max() if n > 0 else 0.0  # the reduction reads the filled array
 
 
 
@@ -1405,7 +1405,7 @@ def _scatter(cs, st, cl, bc, ph, skin_half):
             vel[g, c] += cs.dev[a, 3 + c]
             spin[g, c] += cs.dev[a, 6 + c]
         st.fresh[g] = 0
-        history_mark_impact(st.hist_meta[g])  # the next step takes the slip step (history.py)
+        history_mark_impact(st.hist_meta[g])  # the next step takes the slip step (physics/history.py)
         if pos[g, 1] > st.jump_ymax[g]:  # the bed pass skips the grains sub-stepped here
             st.jump_ymax[g] = pos[g, 1]
     ph.n_act[0] = na
@@ -1537,7 +1537,7 @@ def _missed_contacts(pos, cl):
 
 @njit(cache=True)
 def hard_contact_phase(st, cl, restitution, friction, before):
-    """Binary hard-sphere impulses at the end-of-flight positions (contacts.py); grains
+    """Binary hard-sphere impulses at the end-of-flight positions (contacts/pairs.py); grains
     that collided restart their Basset history (their position is unchanged, so the
     fluid sample stays valid). ``before`` (N,) int64 scratch. Returns the collisions."""
     n = st.pos.shape[0]
@@ -1547,5 +1547,5 @@ def hard_contact_phase(st, cl, restitution, friction, before):
     if count > 0:
         for i in range(n):
             if cl.collisions[i] != before[i]:
-                history_mark_impact(st.hist_meta[i])  # the next step takes the slip step (history.py)
+                history_mark_impact(st.hist_meta[i])  # the next step takes the slip step (physics/history.py)
     return count

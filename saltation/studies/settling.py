@@ -1,7 +1,7 @@
 """Settling of bonded-sphere grains in still water (seed 000 §4.1) and the references.
 
 ``terminal_velocity(composite, ...)`` drops one composite grain from rest in quiescent
-fluid (flow source "still": every force of clusters.py on, the lift and fluid
+fluid (flow source "still": every force of flight/composites.py on, the lift and fluid
 acceleration vanish) and integrates until the vertical velocity has settled; it returns
 the terminal velocity (m/s) and the orientation history.
 
@@ -30,8 +30,8 @@ import math
 
 import numpy as np
 
-from .bed import bed_parameters
-from .config import GRAVITY
+from ..bed.virtual import bed_parameters
+from ..case.schema import GRAVITY
 
 RHO_F = 1000.0
 NU = 1.0e-6
@@ -90,8 +90,9 @@ def terminal_velocity(composite, *, density=2650.0, nu=NU, quat=(1.0, 0.0, 0.0, 
     across the fall when tilt → 1 (disks, blades) or long_axis → 0 (rods)."""
     from flowfields import profile_dataset
 
-    from . import clusters, history
-    from .forces import CM, make_coefficients
+    from ..flight import composites as clusters
+    from ..physics import history
+    from ..physics.forces import CM, make_coefficients
 
     R = density / RHO_F - 1.0
     dn = composite.nominal_diameter

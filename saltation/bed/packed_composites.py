@@ -1,11 +1,11 @@
 """Bonded-sphere grains on the packed bed (SPEC §4 option 2; seed 000 §2.4).
 
-The bed is packed_bed.py's hexagonal layer of fixed spheres of diameter Dn (the length
+The bed is bed/packed.py's hexagonal layer of fixed spheres of diameter Dn (the length
 unit of composite runs), centres at y = −½, tops at y = 0, found through the same cells
 (``make_packed_bed(lx, lz, cut)`` with cells ≥ the largest centre-to-centre contact
 distance ½ + d_k/2 of a component). Each component sphere k of a grain meets the bed
 spheres with its own radius; the impulse acts on the rigid body at the real contact
-point along the real normal, with the rigid-body collision matrix of clusters.py
+point along the real normal, with the rigid-body collision matrix of flight/composites.py
 (``clusters._impulse``: Newton restitution e and Coulomb friction f on the contact-point
 velocity, sticking and sliding branches — SPEC §4's rebound for a sphere).
 
@@ -28,7 +28,7 @@ Jumps as on the packed bed for spheres: only an impact after at least one step w
 bed contact ends a jump; a resting or rolling grain moves its next jump's start along.
 The jump height is the highest elevation of the grain's lowest point above the bed top
 (y = 0), as on the virtual bed. Every impulse restarts the Basset history of all
-components (history.py). Known gap: a contact that begins and ends within one step
+components (physics/history.py). Known gap: a contact that begins and ends within one step
 without the end position overlapping a bed sphere is not seen (grains move ≲ 0.2 Dn
 per step at the runs' time steps, so only grazing contacts can pass).
 """
@@ -38,10 +38,10 @@ import math
 
 from numba import njit, prange
 
-from .cells import min_image
-from .clusters import OK, _impulse, _lowest, _quat_to_matrix, _rotate_quat, _world_inverse_inertia
-from .history import history_mark_impact
-from .packed_bed import BED_CENTRE_Y, _nearest_entry, bed_cell, bed_offset, bed_stencil_cell, end_jump
+from ..contacts.cells import min_image
+from ..flight.composites import OK, _impulse, _lowest, _quat_to_matrix, _rotate_quat, _world_inverse_inertia
+from ..physics.history import history_mark_impact
+from .packed import BED_CENTRE_Y, _nearest_entry, bed_cell, bed_offset, bed_stencil_cell, end_jump
 
 MAX_BOUNCES = 4  # impulses per grain and step at most
 PUSH_SWEEPS = 8  # Gauss–Seidel sweeps that remove residual overlaps
@@ -107,7 +107,7 @@ def _move(st, w, p, h):
 def _push_out(st, w, p, pb):
     """Translate grain p out of every bed sphere a component overlaps; True if any did."""
     touched = False
-    for sweep in range(PUSH_SWEEPS):
+    for _sweep in range(PUSH_SWEEPS):
         moved = False
         for k in range(st.cstart[p], st.cstart[p + 1]):
             rx, ry, rz = _component_world(st, w, p, k)
@@ -160,7 +160,7 @@ def packed_bed_check_cluster(st, w, p, t, dt, step, bed, pb, last_contact):
     iw = w.aug[p, 0:3, 0:3]
     remaining = dt
     hits = 0
-    for it in range(MAX_BOUNCES):
+    for _it in range(MAX_BOUNCES):
         k, j, tau = _first_entry(st, w, p, pb, remaining)
         if j < 0:
             break
@@ -192,7 +192,7 @@ def packed_bed_check_cluster(st, w, p, t, dt, step, bed, pb, last_contact):
             st.jump_t0[p] = t_hit
             st.jump_x0[p] = st.pos[p, 0]
         for kk in range(st.cstart[p], st.cstart[p + 1]):
-            history_mark_impact(st.hist_meta[kk])  # the next step takes the slip step (history.py)
+            history_mark_impact(st.hist_meta[kk])  # the next step takes the slip step (physics/history.py)
         _move(st, w, p, tau)
         remaining = tau
         if remaining <= 0.0:

@@ -13,7 +13,7 @@ A sweep file is a case file plus a ``[sweep]`` grid::
 The grid is the Cartesian product of the lists, in the order written (the last key
 varies fastest). Each point is a case named from its values, e.g. ``c0.04_t1.79_s0``
 (concentration shown in **percent**, τ*/τ*c, seed; other keys by their name), and runs
-through :func:`saltation.simulation.run` into ``OUT/cases/NAME``.
+through :func:`saltation.engine.simulation.run` into ``OUT/cases/NAME``.
 
 Restart rules: a case whose ``summary.json`` says ``"completed"`` is finished and is not
 run again (that file is written last, atomically, after every output is closed); a case
@@ -40,15 +40,16 @@ import math
 import os
 import time
 import tomllib
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Mapping
+from typing import Any
 
 import pandas as pd
 
 from flowfields.dataset import SHIPPED_DATASETS
 
-from .config import TABLES, CaseError, load_case
+from ..case.schema import TABLES, CaseError, load_case
 
 # readable case names: short tags for the usual grid keys
 _TAGS = {"run.concentration": "c", "flow.tau_ratio": "t", "run.seed": "s", "run.n_particles": "n",
@@ -267,7 +268,7 @@ def is_finished(directory: Path, case: SweepCase) -> bool:
 
 def run_case(tables: dict, values: dict, name: str, directory: str, threads: int) -> dict:
     """Run (or resume) one sweep case; returns its summary dict. Runs on a Dask worker."""
-    from .simulation import CHECKPOINT, SimulationError, run
+    from ..engine.simulation import CHECKPOINT, SimulationError, run
 
     directory = Path(directory)
     fingerprint = _fingerprint(tables, values)
@@ -384,7 +385,7 @@ def plan_workers(n_cases: int, workers: int | None, threads: int | None, cores: 
 
 def _cost(case: SweepCase) -> int:
     """Grain-steps of a case (0 when its domain needs the LES box to resolve)."""
-    from .config import resolve_domain
+    from ..case.schema import resolve_domain
 
     try:
         c = resolve_domain(load_case(case.tables, case.values))

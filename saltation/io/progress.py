@@ -42,8 +42,11 @@ class compile_notice:  # noqa: N801  (used as a context manager, like a function
     def __init__(self, enabled: bool, family: str = "spheres"):
         import numba
 
+        from flowfields._numba_cache import kernel_version
+
         self.family = family
-        self.marker = Path(numba.config.CACHE_DIR) / f"compiled-{family}.json"
+        # one marker per version of the kernel sources: after a change, the notice comes again
+        self.marker = Path(numba.config.CACHE_DIR) / f"compiled-{family}-{kernel_version()}.json"
         self.active = bool(enabled) and not self.marker.exists()
         self._done = threading.Event()
         self._beat = None

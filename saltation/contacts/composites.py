@@ -2,7 +2,7 @@
 item 2): soft contacts between the component spheres of *different* grains, summed into
 each grain's force and torque, sub-stepped inside the hydrodynamic step.
 
-Units: those of clusters.py (length Dn, velocity u*, time Dn/u*, mass ρ Dn³ with ρ the
+Units: those of flight/composites.py (length Dn, velocity u*, time Dn/u*, mass ρ Dn³ with ρ the
 fluid density, force ρ u*² Dn², torque ρ u*² Dn³). The rigid mass of grain i is
 m_i = (1+R) V_i (``ClusterState.mass``), its rigid inertia I_i (body frame).
 
@@ -11,19 +11,19 @@ Contact law (per pair of component spheres a ∈ grain i, b ∈ grain j ≠ i)
 Centres x_a, x_b (minimum image in x and z), r = |x_a − x_b|, n = (x_a − x_b)/r,
 overlap δ = (d_a + d_b)/2 − r > 0. Contact point: the middle of the overlap,
 x_c = x_a − (d_a/2 − δ/2) n (= x_b + (d_b/2 − δ/2) n); for two unit spheres this is the
-midpoint of contacts.py's LEVER_CONTACT_POINT. The same point serves both grains, so the
+midpoint of contacts/pairs.py's LEVER_CONTACT_POINT. The same point serves both grains, so the
 force pair has no net moment and the total angular momentum (orbital + spin) is
 conserved to round-off.
 
 - contact-point velocities u_i = v_i + Ω_i × (x_c − x_i), u_j likewise; v_r = u_i − u_j,
   v_n = v_r·n, v_t = v_r − v_n n;
 - normal force on i (linear spring–dashpot, Cundall & Strack 1979, no clamping as in
-  contacts.py): F_n = (k_n δ − c_n v_n) n with c_n = 2 √(m_eff k_n) |ln e| / √(ln² e + π²),
+  contacts/pairs.py): F_n = (k_n δ − c_n v_n) n with c_n = 2 √(m_eff k_n) |ln e| / √(ln² e + π²),
   m_eff = m_i m_j / (m_i + m_j) the grains' reduced rigid mass (contacts.normal_damping
   written for a pair of unequal grains). A central impact then rebounds with exactly the
   case's e; an off-centre one feels a smaller point-effective mass (rotation) and
   rebounds a little more elastically — the usual choice for clumped-sphere DEM;
-- tangential spring (history per component pair, as contacts.py / LAMMPS
+- tangential spring (history per component pair, as contacts/pairs.py / LAMMPS
   gran/hooke/history): ξ ← ξ + v_t h, ξ ← ξ − (ξ·n) n, F_t = −k_t ξ; Coulomb limit
   |F_t| ≤ f |F_n| (F_t scaled to it and ξ = −F_t/k_t);
 - on grain i: F += F_n + F_t, T += (x_c − x_i) × (F_n + F_t); on j the negatives.
@@ -39,7 +39,7 @@ mass 1/(1/m + (c×n)·I⁻¹(c×n)) over the grains, their component surface poi
 directions n (200 directions; ``substeps``). That is the worst case — a tip of the
 lightest rod hit sideways — so typical contacts get more sub-steps than asked for.
 
-Scheme inside the hydrodynamic step (operator split after the free flight, as collide.py)
+Scheme inside the hydrodynamic step (operator split after the free flight, as contacts/phase.py)
 -----------------------------------------------------------------------------------------
 1. Free flight (clusters.step_grain, RK4 + the virtual bed) takes every grain from its
    start state (x₀, v₀, q₀, Ω₀) (``ClusterWork.x0``) to (x₁, v₁, q₁, Ω₁).
@@ -58,17 +58,17 @@ Scheme inside the hydrodynamic step (operator split after the free flight, as co
    drift, contact forces at the half-kicked velocities, half kick), a set-up force
    evaluation at σ = 0 that does not advance ξ. The fluid force and torque act as in
    free flight (held over the step); the contact acts on the rigid mass and rigid
-   inertia (no added mass: as the bed rebound, clusters.py, and the sphere contacts).
+   inertia (no added mass: as the bed rebound, flight/composites.py, and the sphere contacts).
    Integrating δL (world frame) rather than δΩ makes the kicks conserve total angular
    momentum exactly; the gyroscopic change of the free rotation is in the RK4 path.
    Component candidates come from a neighbour list of the active grains' component
    spheres, built at σ = 0 through a cell list (cells ≥ d_max + 2 m_max + s, periodic in
-   x and z, clamped in y like cells.py) with the pair cutoff (d_a + d_b)/2 + m_a + m_b + s,
+   x and z, clamped in y like contacts/cells.py) with the pair cutoff (d_a + d_b)/2 + m_a + m_b + s,
    m_a = D_i + |r_a| φ_i the reach of component a (φ_i the slerp angle). A grain whose
    deviation (|δx| + ρ_i ∫|δΩ| dt) exceeds s/2 is counted in ``overruns`` and the list is
    rebuilt at the current sub-step (history carried over by partner id).
 4. A grain that touched another one gets (x₁ + δx, v₁ + δv, q₁ ⊗ δq, Ω₁ + I_w⁻¹ δL), its
-   fluid re-sampled and its Basset history restarted (as collide.py and a bed impact:
+   fluid re-sampled and its Basset history restarted (as contacts/phase.py and a bed impact:
    a contact is an impulsive velocity change). The others keep the RK4 result bit for
    bit.
 
@@ -102,8 +102,8 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit, objmode, prange
 
-from .clusters import OK, _quat_to_matrix, step_grain
-from .history import history_mark_impact
+from ..flight.composites import OK, _quat_to_matrix, step_grain
+from ..physics.history import history_mark_impact
 
 __all__ = ["ClusterContacts", "make_cluster_contacts", "contact_parameters", "substeps", "contact_phase",
            "build_contact_list",
@@ -844,7 +844,7 @@ def _drift(st, cc, h, half_skin):
 
 @njit(cache=True)
 def _drift_one(st, cc, p, h, half_skin):
-    iw = cc.iw[p]
+    cc.iw[p]
     rot = cc.rot[p]
     w0, w1, w2 = cc.dOm[p, 0], cc.dOm[p, 1], cc.dOm[p, 2]
     # body frame of the free path: R_f = R(Q) R(δq)ᵀ; R_fᵀ δΩ = R(δq) R(Q)ᵀ δΩ
@@ -908,7 +908,7 @@ def _finish_one(st, w, cc, p):
         # the Basset memory (as a bed impact)
         st.fresh[p] = 0
         for k in range(st.cstart[p], st.cstart[p + 1]):
-            history_mark_impact(st.hist_meta[k])  # the next step takes the slip step (history.py)
+            history_mark_impact(st.hist_meta[k])  # the next step takes the slip step (physics/history.py)
         low = 1e300
         for k in range(st.cstart[p], st.cstart[p + 1]):
             y = st.pos[p, 1] + rot[1, 0] * st.r_body[k, 0] + rot[1, 1] * st.r_body[k, 1] \

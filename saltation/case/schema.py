@@ -62,9 +62,10 @@ import difflib
 import math
 import os
 import tomllib
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, ClassVar, Iterable, Mapping
+from typing import Any, ClassVar
 
 from flowfields.dataset import SHIPPED_DATASETS
 
@@ -232,8 +233,8 @@ def _normalise(table: str, name: str, m: Mapping[str, Any], value: Any) -> Any:
 
 def _class_table(where: str, table: str, name: str, kind: str, value: Any) -> dict:
     """particle.fractions / particle.ratios: a table keyed by Zingg class, checked by
-    saltation.shapes (fractions in [0, 1] summing to 1; ratio ranges inside the class)."""
-    from .shapes import CLASSES, _check_ratios, check_fractions
+    saltation.grains.shapes (fractions in [0, 1] summing to 1; ratio ranges inside the class)."""
+    from ..grains.shapes import CLASSES, _check_ratios, check_fractions
 
     if not isinstance(value, Mapping) or not value:
         what = ("{disk = 0.43, blade = 0.09, rod = 0.14, equant = 0.34}" if kind == "fractions"
@@ -288,7 +289,7 @@ class ParticleConfig(_Table):
                            doc="grain diameter d (m)")
     density: float = _key(2650.0, kind="float", unit="kg/m³", gt=0.0,
                           doc="grain density ρp (kg/m³); default quartz")
-    # Irregular grains as bonded spheres (issue 6, seed 000 §2.4; saltation.shapes):
+    # Irregular grains as bonded spheres (issue 6, seed 000 §2.4; saltation.grains.shapes):
     # ``diameter`` is then the nominal diameter Dn = (Dl Di Ds)^{1/3} of every grain.
     shape: str = _key("sphere", kind="choice", choices=SHAPES,
                       aliases={"spheres": "sphere", "natural": "mixture", "mix": "mixture",
@@ -297,7 +298,7 @@ class ParticleConfig(_Table):
                       doc='grain shape: "sphere" (point-particle model), "mixture" (Zingg '
                           'classes drawn with particle.fractions) or one Zingg class '
                           '"disk" | "blade" | "rod" | "equant" (bonded spheres, '
-                          'saltation.run_clusters); diameter is the nominal Dn')
+                          'saltation.engine.composites); diameter is the nominal Dn')
     fractions: dict | None = _key(kind="fractions",
                                   doc='Zingg class fractions of shape = "mixture", an inline '
                                       'table {disk, blade, rod, equant} summing to 1; absent: '
@@ -322,7 +323,7 @@ class ParticleConfig(_Table):
     def shape_fractions(self) -> dict[str, float]:
         """Zingg class fractions in use: Smith (2003) for a mixture unless given; 1 for a
         single class; {} for spheres."""
-        from .shapes import CLASSES, SMITH_2003
+        from ..grains.shapes import CLASSES, SMITH_2003
 
         if self.shape == "sphere":
             return {}
@@ -403,7 +404,7 @@ class ForcesConfig(_Table):
     weight: bool = _key(True, kind="bool", doc="submerged weight")
     spin: bool = _key(True, kind="bool",
                       doc="spin law in free flight: rotational drag relaxing the grain's spin "
-                          "toward half the fluid vorticity (SPEC §2, spin.py); false: spin "
+                          "toward half the fluid vorticity (SPEC §2, physics/spin.py); false: spin "
                           "changes only at contacts")
     wake_shielding: bool = _key(True, kind="bool",
                                 doc="bonded-sphere grains: a component sphere in the wake of "
@@ -558,7 +559,7 @@ class OutputConfig(_Table):
     variance_origins: int = _key(8, kind="int", ge=1,
                                  doc="time origins the displacement variances are averaged over")
     checkpoint_every: float = _key(600.0, kind="float", unit="s", ge=0.0,
-                                   doc="wall-clock seconds between checkpoints (simulation.py; "
+                                   doc="wall-clock seconds between checkpoints (engine/simulation.py; "
                                        "0: none by time); every 5 % of the steps and SIGINT/SIGTERM "
                                        "always write one")
     checkpoint_steps: int = _key(0, kind="int", ge=0,

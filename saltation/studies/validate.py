@@ -11,7 +11,7 @@ One configuration for all four stages (d = 0.69 mm quartz, τ*c = 0.032, τ*/τ*
 * ``rough log law`` — the analytic rough log law u⁺ = 2.5 ln(30 y/k_s), k_s = 2.5 d.
 
 The mean jump height H/d, length L/d and grain velocity U/u* (mean ± std, jumps counted)
-are compared with every published regression of ``saltation.regressions`` (van Rijn 1984;
+are compared with every published regression of ``saltation.analysis.regressions`` (van Rijn 1984;
 Fernandez Luque & van Beek 1976; Sekine & Kikkawa 1992; Wiberg & Rubin 1989; Lamb et al.
 2008; see docs/references.md for where each was read), each ratio printed, and with the
 envelope of those regressions widened by 25 % (the acceptance band of issue 17). A user's
@@ -36,7 +36,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from . import regressions
+from ..analysis import regressions
 
 CASES = {
     1.79: "nino_garcia_179.toml",
@@ -111,8 +111,8 @@ def _stats(result) -> dict:
 
 
 def _run_case(ratio, out, overrides, duration_scale, progress, threads):
-    from .config import load_case
-    from .simulation import run
+    from ..case.schema import load_case
+    from ..engine.simulation import run
 
     case_path = cases_dir() / CASES[ratio]
     over = {"output.vtk": False, "output.tracks": False, "run.threads": threads, **overrides}

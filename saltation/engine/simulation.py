@@ -2,7 +2,7 @@
 
 The loop is short on purpose: it advances the Numba kernel in chunks that end at output
 times, collects finished jumps, and hands data to the writers. All arithmetic lives in
-the kernels (integrator.py and the sub-model modules it calls).
+the kernels (flight/spheres.py and the sub-model modules it calls).
 """
 from __future__ import annotations
 
@@ -21,18 +21,18 @@ import numba
 import numpy as np
 import pandas as pd
 
-from . import history
-from .bed import run_bed_parameters
-from .config import Case, dump_toml, load_case, resolve_domain
-from .flow import check_bed
-from .forces import make_coefficients
-from .initial import initial_conditions, initial_conditions_apart
-from .integrator import NOT_FINITE, make_state, make_workspace
+from ..bed.virtual import run_bed_parameters
+from ..case.schema import Case, dump_toml, load_case, resolve_domain
+from ..flight.spheres import NOT_FINITE, make_state, make_workspace
+from ..grains.initial import initial_conditions, initial_conditions_apart
+from ..io.progress import compile_notice
+from ..io.run_directory import CHECKPOINT_NAME
+from ..io.writers import JumpWriter, ParaViewWriter, TrackWriter, run_metadata, write_json, write_table
+from ..physics import history
+from ..physics.fluid import check_bed
+from ..physics.forces import make_coefficients
 from .statistics import empty_rows, jump_statistics
 from .stepping import Stepper
-from .progress import compile_notice
-from .run_directory import CHECKPOINT_NAME
-from .writers import JumpWriter, ParaViewWriter, TrackWriter, run_metadata, write_json, write_table
 
 VARIANCE_FILE = "variance.parquet"  # displacement variances for the diffusion exponents
 
@@ -46,7 +46,7 @@ class RunInterrupted(KeyboardInterrupt):
     outputs flushed and summary.json says status "interrupted". ``result`` is the
     RunResult so far, ``signum`` the signal; ``run(..., resume=True)`` continues."""
 
-    def __init__(self, result: "RunResult", signum: int):
+    def __init__(self, result: RunResult, signum: int):
         super().__init__(f"run interrupted by signal {signum} at step {result.summary['steps']}; "
                          f"checkpoint in {result.directory / CHECKPOINT}")
         self.result = result
@@ -58,7 +58,7 @@ class RunInterrupted(KeyboardInterrupt):
 # buffers). Those points depend on the state alone, never on wall time or on when a
 # signal came, so a resumed run calls the kernel with the same (t0, n_steps) chunks and
 # collects jumps in the same order as an uninterrupted one: bit for bit the same run.
-CHECKPOINT = CHECKPOINT_NAME  # "checkpoint.npz" (run_directory.py)
+CHECKPOINT = CHECKPOINT_NAME  # "checkpoint.npz" (io/run_directory.py)
 # 3: the Basset history keeps slip steps (history.N_JUMPS slots in hist_meta, hist_tail)
 CHECKPOINT_FORMAT = 3
 PARTS = ".parts"  # checkpointable Parquet parts, merged into jumps/tracks.parquet at the end
@@ -122,9 +122,9 @@ def run(case, out=None, progress=True, resume=False, overwrite=False, **override
     returns a RunResult (.summary, .jumps, .tracks). A run directory that already holds
     files is refused unless ``resume=True`` (continue from its checkpoint: same case, the
     result is that of an uninterrupted run) or ``overwrite=True`` (replace the run's
-    outputs); it is locked while the run writes (run_directory.py).
+    outputs); it is locked while the run writes (io/run_directory.py).
     SIGINT/SIGTERM write a checkpoint and raise :class:`RunInterrupted`."""
-    from .run_directory import claim_run_directory
+    from ..io.run_directory import claim_run_directory
 
     case = load_case(case, overrides or None) if not isinstance(case, Case) else case
     out = Path(out or case.output.directory or Path("runs") / (case.run.name or "run"))
@@ -133,8 +133,8 @@ def run(case, out=None, progress=True, resume=False, overwrite=False, **override
             compile_notice(progress, family) as notice:  # set-up and the first kernel call compile
         ds = open_flow(case)
         case = resolve_domain(case, _les_box_m(ds, case) if case.flow.source == "les" else None)
-        if family == "composites":  # bonded-sphere grains (issue 6): run_clusters.py
-            from .run_clusters import ClusterSimulation
+        if family == "composites":  # bonded-sphere grains (issue 6): engine/composites.py
+            from .composites import ClusterSimulation
 
             return ClusterSimulation(case, ds, out, progress=progress, resume=resume, notice=notice).run()
         return Simulation(case, ds, out, progress=progress, resume=resume, notice=notice).run()
@@ -187,7 +187,7 @@ class Simulation:
         self.n_window = f.basset_window
         self.hist_coef = history.make_history_coefficients(self.dt, self.n_window, impacts=f.basset_impacts)
         self.top_d = float(flow.y[-1]) / self.re_star
-        # contacts and bed (stepping.py: free flight → grain contacts → bed each step)
+        # contacts and bed (engine/stepping.py: free flight → grain contacts → bed each step)
         self.stepper = Stepper(case, self.n, self.domain_d, self.top_d, self.coef, self.bed, case.run.seed,
                                self.hist_coef, self.dt)
         self._stepper_arrays = None
@@ -219,7 +219,7 @@ class Simulation:
 
     # ------------------------------------------------------------------ main loop
     def run(self) -> RunResult:
-        from .progress import progress_bar
+        from ..io.progress import progress_bar
 
         c = self.case
         self.out.mkdir(parents=True, exist_ok=True)
@@ -356,7 +356,7 @@ class Simulation:
         output.variance is off or there are fewer than 2 grains. On resume its sums come
         from the checkpoint (one file with the state: they cannot be lost apart from it);
         a checkpoint written without them (output.variance was off) cannot switch it on."""
-        from .analysis.variance import AnalysisError, RunVariance
+        from ..analysis.variance import AnalysisError, RunVariance
 
         c = self.case
         try:
@@ -445,7 +445,7 @@ class Simulation:
     def _read_checkpoint(self):
         """(meta, GrainState, Workspace, jump rows) from out/checkpoint.npz; the case must be
         the one that wrote it (output.checkpoint_*, output.directory, run.threads may differ)."""
-        from .integrator import GrainState
+        from ..flight.spheres import GrainState
 
         path = self.out / CHECKPOINT
         if not path.exists():

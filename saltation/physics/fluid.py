@@ -10,9 +10,17 @@ from __future__ import annotations
 from numba import njit
 
 from flowfields.dataset import DatasetError
-
-from flowfields.sampler import (ABOVE_TOP, BELOW_WALL, gather_cell, locate_xzt, sample_column, sample_point,
-                                velocity_in_cell, vorticity_from_gradient, wall_normal)
+from flowfields.sampler import (
+    ABOVE_TOP,
+    BELOW_WALL,
+    gather_cell,
+    locate_xzt,
+    sample_column,
+    sample_point,
+    velocity_in_cell,
+    vorticity_from_gradient,
+    wall_normal,
+)
 
 
 @njit(cache=True, error_model="numpy", _nrt=False)

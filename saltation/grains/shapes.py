@@ -248,7 +248,7 @@ class Composite:
         hi = (self.centres + self.radii[:, None]).max(axis=0)
         return hi - lo
 
-    def scaled(self, factor: float) -> "Composite":
+    def scaled(self, factor: float) -> Composite:
         """The same cluster scaled by ``factor`` (lengths)."""
         f = float(factor)
         return Composite(self.zingg_class, self.subtype, tuple(a * f for a in self.axes),

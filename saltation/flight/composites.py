@@ -22,16 +22,16 @@ Magnus                 F = (π/8) C_Ω d_k³ (Ω − ½ω_f) × u_r
 added mass (fluid)     F = Cm w_k (∂u_f/∂t + (u_k·∇) u_f)
 fluid acceleration     F = w_k (∂u_f/∂t + (u_f·∇) u_f)
 Basset                 F = −(3/2)√π d_k²/√Re* · I_k,  I_k the history integral of
-                       the component's own slip (history.py, window + tail)
+                       the component's own slip (physics/history.py, window + tail)
 rotational drag        T = −(d_k⁵/64) C_ω(Re_r) |ω_r| ω_r, ω_r = Ω − ½ω_f,
-                       Re_r = d_k² |ω_r| Re*/4 (``spin.py`` table)
+                       Re_r = d_k² |ω_r| Re*/4 (``physics/spin.py`` table)
 submerged weight       F = (V/τ*)(sin θ, −cos θ, 0) at the centre of mass
 =====================  ===========================================================
 
 summed into the force F and the torque T = Σ (R r_k) × F_k + Σ T_k: a sheared flow
 exerts a torque through the different drag on the components. For d_k = 1, r_k = 0
 every line divided by the virtual mass (1+R+Cm)π/6 is the sphere's per-mass term of
-forces.py / spin.py, so the one-sphere grain is the sphere integrator.
+physics/forces.py / physics/spin.py, so the one-sphere grain is the sphere integrator.
 
 Wake shielding (``[forces] wake_shielding``, default on). A component in the wake of
 another component of the same grain feels less drag than an isolated sphere (tandem
@@ -55,20 +55,20 @@ generalized mass matrix in the body frame
     M_b = [[(m + m_a) 1, −[S]×], [[S]×, I_b + I_a]],
     m = (1+R) V,  m_a = Cm V,  S = Cm Σ w_k r_k,  I_a = Cm Σ w_k (|r_k|² 1 − r_k r_kᵀ),
 
-(I_b = (1+R) × the union's second moment, shapes.py) with the right side
+(I_b = (1+R) × the union's second moment, grains/shapes.py) with the right side
 [F_b − ω_b × (ω_b × S); T_b − ω_b × ((I_b + I_a) ω_b)] (Euler's equations with the
 gyroscopic and centripetal terms; the inertia need not be diagonal). S = 0 unless
 the spheres overlap. dq/dt = ½ (0, Ω) ⊗ q, dΩ/dt = R α_b, dv/dt = R a_b. Classic RK4
 on (x, v, q, Ω), q renormalized after each step.
 
-Basset closure (as history.py for spheres): the history force is held at I_n over the
+Basset closure (as physics/history.py for spheres): the history force is held at I_n over the
 stages; at the end of the step the newest sample is implicit, which for a rigid body
 couples the components: (M_b + (Δt/2) γ₀ C_b) q_{n+1} = M_b q* − (Δt/2) Σ_k J_kᵀ c_k
 (I*_k − γ₀ u_f,k − I_k,n), with J_k q = v + ω × r_k, c_k = (3/2)√π d_k²/√Re* and
 C_b = Σ c_k J_kᵀ J_k; one 6×6 solve per grain and step. All components restart their
-memory together at release and at every bed impact (history.py explains why).
+memory together at release and at every bed impact (physics/history.py explains why).
 
-Bed (virtual rough bed, bed.py). The grain touches the bed when its lowest component
+Bed (virtual rough bed, bed/virtual.py). The grain touches the bed when its lowest component
 sphere's bottom reaches y = 0. As for spheres, the crossing is located by linear
 interpolation within the step (centre of mass moved back along v, orientation turned
 back by Ω), the contact normal n is drawn by ``bed.virtual_bed_normal`` from the
@@ -85,9 +85,9 @@ a second impact on the horizontal bed follows (as ``bed.bed_rebound``). Jump hei
 is the highest elevation of the grain's lowest point above the bed top.
 
 With bed.model = "packed" (``bed[BED_MODEL] = BED_PACKED``) step_grain leaves the bed
-alone and cluster_bed.py applies the hexagonal layer of fixed spheres after the move.
+alone and bed/packed_composites.py applies the hexagonal layer of fixed spheres after the move.
 
-Grain–grain contacts between composites are not in this module: cluster_contacts.py
+Grain–grain contacts between composites are not in this module: contacts/composites.py
 acts on the component spheres of different grains after each free-flight step
 (``advance_clusters_contacts``; ``advance_clusters`` here is the run without them).
 """
@@ -101,22 +101,44 @@ from numba import njit, prange
 
 from flowfields.sampler import ABOVE_TOP, sample_column, sample_point, vorticity_from_gradient
 
-from . import history
-from .bed import BED_MODEL, virtual_bed_normal
-from .forces import (CL, CM, C_OMEGA, COS_SLOPE, ON_ADDED_MASS, ON_BASSET, ON_DRAG,
-                     ON_FLUID_ACC, ON_LIFT, ON_MAGNUS, ON_WEIGHT, RE_STAR, SIN_SLOPE,
-                     TAU_STAR, drag_factor)
-from .history import META_COUNT, _advance, _integral3, age_jumps, history_mark_impact, history_start_step, jump_impulse
-from .jumps import BED_MIN_JUMP_DURATION, BED_MIN_JUMP_HEIGHT, close_jump
-from .rng import uniform2
-from .spin import SPIN_TABLE_C, _spin_row
+from ..bed.jumps import BED_MIN_JUMP_DURATION, BED_MIN_JUMP_HEIGHT, close_jump
+from ..bed.virtual import BED_MODEL, virtual_bed_normal
+from ..physics import history
+from ..physics.forces import (
+    C_OMEGA,
+    CL,
+    CM,
+    COS_SLOPE,
+    ON_ADDED_MASS,
+    ON_BASSET,
+    ON_DRAG,
+    ON_FLUID_ACC,
+    ON_LIFT,
+    ON_MAGNUS,
+    ON_WEIGHT,
+    RE_STAR,
+    SIN_SLOPE,
+    TAU_STAR,
+    drag_factor,
+)
+from ..physics.history import (
+    META_COUNT,
+    _advance,
+    _integral3,
+    age_jumps,
+    history_mark_impact,
+    history_start_step,
+    jump_impulse,
+)
+from ..physics.rng import uniform2
+from ..physics.spin import SPIN_TABLE_C, _spin_row
 
 OK = 0
 NOT_FINITE = 1
 JUMP_FIELDS = 4
 NX = 13  # x(3) v(3) q(4) Ω(3)
 SQRT_PI = math.sqrt(math.pi)
-# bed[BED_MODEL] (bed.py): 0 → the virtual bed here; BED_PACKED → cluster_bed.py
+# bed[BED_MODEL] (bed/virtual.py): 0 → the virtual bed here; BED_PACKED → bed/packed_composites.py
 BED_PACKED = 1.0
 # wake shielding of a component by an upstream component of the same grain (docstring)
 WAKE_A = 0.5  # drag deficit of a trailing sphere touching its leader, on the axis
@@ -495,7 +517,7 @@ def _rhs(coef, st, w, p, x, kout, with_basset):
         ft[3] += ry * f2 - rz * f1
         ft[4] += rz * f0 - rx * f2
         ft[5] += rx * f1 - ry * f0
-        # rotational drag of the component spinning with the body (spin.py, SPEC §2)
+        # rotational drag of the component spinning with the body (physics/spin.py, SPEC §2)
         wr = math.sqrt(s0 * s0 + s1 * s1 + s2 * s2)
         re_r = 0.25 * wr * re_star * dk * dk
         row = _spin_row(re_r)
@@ -594,7 +616,7 @@ def _basset_end_step(coef, st, w, hc, p, dt):
         g0 = hc.window_weights[row, 0]
         ck = 1.5 * SQRT_PI * st.d_comp[k] ** 2 / math.sqrt(re_star)
         # world vector e = I* − γ₀ u_f − I_n (+ the exact impulse Q of kept slip steps over
-        # the step, as Q/h: history.py), kept in ft[6:9] for the push below
+        # the step, as Q/h: physics/history.py), kept in ft[6:9] for the push below
         q0, q1, q2 = jump_impulse(st.hist_meta[k], st.hist_tail[k], dt)
         e0 = i0 - g0 * w.uf[k, 0] - st.hist_i[k, 0] + q0 / h
         e1 = i1 - g0 * w.uf[k, 1] - st.hist_i[k, 1] + q1 / h
@@ -811,7 +833,7 @@ def _bed_impact(st, w, p, t, dt, y_old, y_new, bed, seed):
     x[1] -= low  # the lowest point exactly on the bed top at the hit
     # a re-touch within a step of the last contact (a grazing contact closed at the end of
     # one step, the crossing then found at the start of the next) is the same contact
-    # episode: its impulse is applied, but it ends no jump (jumps.py)
+    # episode: its impulse is applied, but it ends no jump (bed/jumps.py)
     close_jump(st, p, st.jump_t0[p], x[0] - st.jump_x0[p], st.jump_ymax[p], t_hit,
                bed[BED_MIN_JUMP_DURATION], bed[BED_MIN_JUMP_HEIGHT])
     rot = w.rot[p]  # orientation at the hit (set by _lowest)
@@ -853,7 +875,7 @@ def _bed_impact(st, w, p, t, dt, y_old, y_new, bed, seed):
     st.jump_ymax[p] = max(low2, 0.0)
     st.fresh[p] = 0
     for k in range(st.cstart[p], st.cstart[p + 1]):
-        history_mark_impact(st.hist_meta[k])  # the next step takes the slip step (history.py)
+        history_mark_impact(st.hist_meta[k])  # the next step takes the slip step (physics/history.py)
 
 
 @njit(cache=True, _nrt=False, error_model="numpy")
@@ -919,7 +941,7 @@ def step_grain(f, coef, bed, seed, st, w, hc, p, t, dt):
     if with_basset:
         _basset_end_step(coef, st, w, hc, p, dt)
     if bed.shape[0] > BED_MODEL and bed[BED_MODEL] == BED_PACKED:
-        return  # the packed bed acts after the move (cluster_bed.py)
+        return  # the packed bed acts after the move (bed/packed_composites.py)
     y_new, kb = _lowest(st, w, p, st.pos[p, 0], st.pos[p, 1], st.pos[p, 2], st.quat[p, 0], st.quat[p, 1],
                         st.quat[p, 2], st.quat[p, 3])
     if y_new < 0.0:

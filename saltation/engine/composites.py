@@ -1,9 +1,9 @@
 """One saltation run of bonded-sphere grains (issue 6 item 5; seed 000 §2.4, §4.4).
 
 ``saltation.run()`` hands a case here when ``particle.shape`` is not "sphere". The run
-mirrors simulation.py's :class:`~saltation.simulation.Simulation`: the same case keys, flow, time step,
-force switches and coefficients, initial conditions (initial.py), bed (virtual bed,
-clusters.py), jump collection and writers, and a summary.json with the same keys, plus:
+mirrors engine/simulation.py's :class:`~saltation.engine.simulation.Simulation`: the same case keys, flow, time step,
+force switches and coefficients, initial conditions (grains/initial.py), bed (virtual bed,
+flight/composites.py), jump collection and writers, and a summary.json with the same keys, plus:
 
 * ``shape``: the shape key, class fractions in use, grains and component spheres per
   class, mean grain volume (d³), the class ids of the track column ``class_id``;
@@ -18,7 +18,7 @@ grain (the length scale d of the particle units). Axes are drawn by
 ``shapes.draw_axes(n, fractions, ratios, Dn=1)`` — classes with the case's fractions
 (Smith 2003 by default; one class for shape = "disk" | "blade" | "rod" | "equant"),
 axis ratios uniform in the class's range — from their own random stream (seed
-[run.seed, 6]), so the grains' start (positions, velocities, spins: initial.py with
+[run.seed, 6]), so the grains' start (positions, velocities, spins: grains/initial.py with
 run.seed, identical to a sphere run's) does not depend on the shapes. Orientations are
 uniformly random (Shoemake 1992, stream [run.seed, 7]); a grain whose lowest point would
 start lower than the lowest sphere can (0.1 d above the bed top) is raised until it is
@@ -26,19 +26,19 @@ there.
 
 Grain–grain contacts (collisions.model = "soft", the default): soft contacts between
 the component spheres of different grains, with the case's [collisions] stiffness,
-restitution, friction, k_t/k_n, steps_per_contact and skin (cluster_contacts.py: units,
+restitution, friction, k_t/k_n, steps_per_contact and skin (contacts/composites.py: units,
 damping, sub-steps, the split with the free flight). The grains then start with their
-bounding spheres apart (``_centres_apart``; contacts off: initial.py's draw as before).
+bounding spheres apart (``_centres_apart``; contacts off: grains/initial.py's draw as before).
 summary.json's ``collisions`` block has the sphere runs' keys (particle_particle,
 per_particle, per_particle_per_unit_time, soft, overlap with max_over_d/mean_over_d in
 Dn, contact_phase), ``timing.particle_collisions_s`` the wall time of the contact phase;
 ``timing.particle_collisions_share`` its share of the stepping time (compile excluded);
 particles.parquet the collisions and largest overlap of each grain.
 
-Bed: the virtual bed (clusters.py, inside the free-flight kernel, so the timing has no
+Bed: the virtual bed (flight/composites.py, inside the free-flight kernel, so the timing has no
 separate bed share: ``timing.bed_s`` = 0, said in ``timing.note``) or, with
 bed.model = "packed", the hexagonal layer of fixed spheres of diameter Dn acting on
-every component sphere (cluster_bed.py, a pass after each step, timed as bed_s).
+every component sphere (bed/packed_composites.py, a pass after each step, timed as bed_s).
 
 Not here (clear errors instead): binary hard-sphere contacts for composites
 (collisions.model = "hard"), checkpoints and --resume. ParaView output holds the
@@ -54,22 +54,26 @@ import numba
 import numpy as np
 import pandas as pd
 
-from . import cluster_bed, cluster_contacts, clusters, history, shapes
-from .bed import run_bed_parameters
+from ..bed import packed_composites as cluster_bed
+from ..bed.packed import make_packed_bed
+from ..bed.virtual import run_bed_parameters
+from ..case.schema import Case, CaseError, dump_toml
+from ..contacts import composites as cluster_contacts
+from ..contacts.pairs import contact_model_from_case
+from ..flight import composites as clusters
+from ..grains import shapes
+from ..grains.initial import Y_RANGE, initial_conditions
+from ..io.writers import ClusterTrackWriter, JumpWriter, ParaViewWriter, run_metadata, write_json, write_table
+from ..physics import history
+from ..physics.forces import CM, make_coefficients
 from .statistics import DISCARDED_JUMPS, empty_rows, jump_statistics
-from .config import Case, CaseError, dump_toml
-from .contacts import contact_model_from_case
-from .forces import CM, make_coefficients
-from .initial import Y_RANGE, initial_conditions
-from .packed_bed import make_packed_bed
-from .writers import ClusterTrackWriter, JumpWriter, ParaViewWriter, run_metadata, write_json, write_table
 
 CHUNK_STEPS = 200
 SERIAL_BELOW = 2000
 CLASS_IDS = {c: i for i, c in enumerate(shapes.CLASSES)}  # track column class_id
-MIN_START_BOTTOM = Y_RANGE[0] - 0.5  # d: lowest start of a sphere's bottom (initial.py)
+MIN_START_BOTTOM = Y_RANGE[0] - 0.5  # d: lowest start of a sphere's bottom (grains/initial.py)
 JUMP_CAPACITY = 16
-SKIN_SPEED = 20.0  # u*: default contact skin covers a grain at this speed over one step, ×1.2 (as stepping.py)
+SKIN_SPEED = 20.0  # u*: default contact skin covers a grain at this speed over one step, ×1.2 (as engine/stepping.py)
 LIST_HEIGHT = (4.0, 60.0)  # d: bounds of the contact cells' height (grains above share its top layer)
 
 
@@ -84,7 +88,7 @@ def check_case(case: Case) -> None:
     if case.collisions.model == "hard" and n > 1:
         raise CaseError(
             f'collisions.model = "hard" is not available with particle.shape = "{case.particle.shape}": '
-            f'bonded-sphere grains have soft grain–grain contacts only (cluster_contacts.py); set '
+            f'bonded-sphere grains have soft grain–grain contacts only (contacts/composites.py); set '
             f'collisions.model = "soft" or "off" (--set collisions.model=soft)', "collisions", "model")
 
 
@@ -135,7 +139,7 @@ class ClusterSimulation:
             spin=f.spin)
         self.packed = case.bed.model == "packed"
         self.bed = run_bed_parameters(case, self.coef, self.dt, clusters.BED_PACKED if self.packed else 0.0)
-        self.pb = None  # packed bed (cluster_bed.py), built with the state
+        self.pb = None  # packed bed (bed/packed_composites.py), built with the state
         self.last_contact = np.full(self.n, -2, np.int64)
         self.bed_s = 0.0
         self.n_window = f.basset_window
@@ -174,7 +178,7 @@ class ClusterSimulation:
         return st
 
     def _contact_setup(self, st):
-        """Grain–grain contact state (cluster_contacts.py): the case's k_n, k_t, e, f in
+        """Grain–grain contact state (contacts/composites.py): the case's k_n, k_t, e, f in
         the composite units (k_n · (1+R)π/6, module docstring there), skin, cells."""
         c = self.case
         cc = c.collisions
@@ -195,7 +199,7 @@ class ClusterSimulation:
     def _advance(self, f, st, w, seed, t0, n):
         if self.pb is None:
             return self._advance_flight(f, st, w, seed, t0, n)
-        # packed bed: after each step's move (free flight, contacts), cluster_bed.py
+        # packed bed: after each step's move (free flight, contacts), bed/packed_composites.py
         step0 = int(round(t0 / self.dt))
         cap = st.jump_buf.shape[1]
         if n == 0:  # compile call: the state is above the bed, nothing happens
@@ -227,9 +231,9 @@ class ClusterSimulation:
         do (an overlapping start would be a violent first contact). Random sequential
         insertion (contacts.random_gas) in a layer from the usual lowest start (or
         run.release_height) + ρ up, tall enough for a solid fraction of bounding spheres
-        of SOLID_FRACTION_AT_START (initial.py); x, z as drawn there."""
-        from .contacts import random_gas
-        from .initial import SOLID_FRACTION_AT_START
+        of SOLID_FRACTION_AT_START (grains/initial.py); x, z as drawn there."""
+        from ..contacts.pairs import random_gas
+        from ..grains.initial import SOLID_FRACTION_AT_START
 
         c = self.case
         rho = max(float((np.linalg.norm(g.centres, axis=1) + g.radii).max()) for g in self.composites)
@@ -248,10 +252,9 @@ class ClusterSimulation:
 
     # ------------------------------------------------------------------ main loop
     def run(self):
-        from .progress import progress_bar
-
-        from .analysis.variance import AnalysisError, RunVariance
-        from .simulation import RunResult, SimulationError, VARIANCE_FILE
+        from ..analysis.variance import AnalysisError, RunVariance
+        from ..io.progress import progress_bar
+        from .simulation import VARIANCE_FILE, RunResult, SimulationError
 
         c = self.case
         self.out.mkdir(parents=True, exist_ok=True)
@@ -367,7 +370,7 @@ class ClusterSimulation:
 
     def _transport(self, rows):
         """q, q* of the run from tracks.parquet (analysis/transport.py) and Ackers–White."""
-        from .analysis.transport import ackers_white, bulk_velocity_plus, einstein_number, transport_rate
+        from ..analysis.transport import ackers_white, bulk_velocity_plus, einstein_number, transport_rate
 
         c = self.case
         if not c.output.tracks:
@@ -494,7 +497,7 @@ class ClusterSimulation:
         out["soft"] = {
             "stiffness_N_m": c.collision_stiffness,
             "kn_particle_units": self.kn,
-            "kn_units": "rho u*^2 d (rho: fluid density; cluster_contacts.py)",
+            "kn_units": "rho u*^2 d (rho: fluid density; contacts/composites.py)",
             "contact_duration_min_particle": math.pi * math.sqrt(mu / self.kn),
             "substeps_per_step": self.n_sub,
             "substep_particle": h,
@@ -519,7 +522,7 @@ class ClusterSimulation:
 
     def _timing(self, wall, compile_s, kernel_s, threads):
         bed_s = self.bed_s
-        where = ("the packed bed: its own pass after each step (cluster_bed.py), bed_s" if self.packed else
+        where = ("the packed bed: its own pass after each step (bed/packed_composites.py), bed_s" if self.packed else
                  "bed rebounds are computed inside the free-flight kernel (clusters.step_grain)")
         if self.cc is None:
             return {"wall_s": wall, "compile_s": compile_s, "kernel_s": kernel_s, "free_flight_s": kernel_s - bed_s,

@@ -5,7 +5,7 @@ length L (d), height H (d), velocity U = L/T (u*), duration T (d/u*). Each grain
 DISCARDED_JUMPS jumps are dropped (initial-condition memory, Moreno-Casas et al. 2022
 §3.2). Mean and standard deviation as the paper reports them; beside them the median
 and the transport-weighted velocity ΣL/ΣT (the mean grain velocity over all flight
-time), which a few unusual jumps cannot move — jumps.py bounds T from below, so
+time), which a few unusual jumps cannot move — bed/jumps.py bounds T from below, so
 U = L/T is bounded by the grain's speed, and the two means agree within the spread.
 """
 from __future__ import annotations

@@ -52,7 +52,7 @@ def initial_conditions_apart(n: int, domain_d, seed: int, release_height=None, m
     lowest start height (or ``release_height``) up, at least as tall as the usual band and
     tall enough to hold the grains at a solid fraction of SOLID_FRACTION_AT_START;
     velocities and spins are drawn as in ``initial_conditions``."""
-    from .contacts import random_gas
+    from ..contacts.pairs import random_gas
 
     lx, lz = domain_d
     pos, vel, spin = initial_conditions(n, domain_d, seed, release_height)

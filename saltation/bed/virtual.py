@@ -41,7 +41,7 @@ modelling choice in the spirit of Niño & García's random bed angles, not a
 derived distribution.  In the along-path plane the
 incidence angle is θa + β ≥ δ, hence u_in·n ≤ -|u_in| sin δ cos(tilt) < 0.
 ``xi1`` and ``xi2`` are uniform (0, 1) numbers supplied by the caller (see
-``rng.py``), so the draw is reproducible per particle.
+``physics/rng.py``), so the draw is reproducible per particle.
 
 Never into the bed.  On a tilted normal, u'·n ≥ 0 does not imply an upward
 velocity: a grain sliding down a lee face leaves with u'_y < 0.  Physically it
@@ -73,7 +73,7 @@ BED_MODEL = 3
 
 def bed_parameters(restitution, friction, max_tilt=MAX_TILT, *, model=0.0, min_jump_duration=0.0,
                    min_jump_height=0.0):
-    """The bed parameter array of the kernels (slots above; jumps.py for the last two:
+    """The bed parameter array of the kernels (slots above; bed/jumps.py for the last two:
     the shortest jump in d/u* and the lowest in d, from jumps.jump_thresholds)."""
     return np.array([restitution, friction, max_tilt, model, min_jump_duration, min_jump_height], np.float64)
 
@@ -81,7 +81,7 @@ def bed_parameters(restitution, friction, max_tilt=MAX_TILT, *, model=0.0, min_j
 def run_bed_parameters(case, coef, dt, model=0.0):
     """bed_parameters of a run: the case's e, f and tilt, the jump thresholds for its step
     dt (d/u*) and weight (coef: forces.make_coefficients)."""
-    from .forces import ALPHA, TAU_STAR
+    from ..physics.forces import ALPHA, TAU_STAR
     from .jumps import jump_thresholds
 
     t_min, h_min = jump_thresholds(dt, coef[TAU_STAR], coef[ALPHA])

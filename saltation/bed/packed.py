@@ -13,7 +13,7 @@ periodic). Spacings differ from the touching values 1 and √3/2 by the rounding
 for a grain to pass (a grain resting in a hollow between three touching bed spheres has
 its centre at ``y = −1/2 + √(2/3) = 0.316``).
 
-Contact search: the bed sphere centres are sorted once into a cells.py grid (cells of at
+Contact search: the bed sphere centres are sorted once into a contacts/cells.py grid (cells of at
 least one diameter, x and z periodic, one layer in y) by the same counting sort as the
 grains; a grain whose centre is below ``y = 1/2`` (only then can it reach a bed sphere)
 looks at the 3 × 3 cells around it and measures separations by the minimum image.
@@ -39,7 +39,7 @@ resting, not saltating: only an impact after at least one step without bed conta
 closes a jump (SPEC §6: a jump runs from one bed impact to the next); while the contact
 lasts, the start of the next jump is moved along with the grain. Every impulse counts as
 a bed collision. The Basset history restarts at each impulse, as on the virtual bed
-(history.py explains why).
+(physics/history.py explains why).
 """
 from __future__ import annotations
 
@@ -49,10 +49,10 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from .bed import NO_IMPACT, rebound
-from .cells import allocate_cells, build_cells, make_grid, min_image
-from .history import history_mark_impact
+from ..contacts.cells import allocate_cells, build_cells, make_grid, min_image
+from ..physics.history import history_mark_impact
 from .jumps import BED_MIN_JUMP_DURATION, BED_MIN_JUMP_HEIGHT, close_jump
+from .virtual import NO_IMPACT, rebound
 
 RADIUS = 0.5  # grain radius (d)
 BED_CENTRE_Y = -0.5  # bed sphere centres: their tops at y = 0
@@ -65,7 +65,7 @@ __all__ = ["PackedBed", "make_packed_bed", "packed_bed_check_particle", "bed_ove
 class PackedBed(NamedTuple):
     # flat (no nested CellGrid): Numba's parallel loops cannot take nested named tuples
     centres: np.ndarray  # (M, 3) bed sphere centres (d), y = BED_CENTRE_Y
-    box: np.ndarray  # (3,) Lx, 1, Lz of the cells.py grid (periodic in x and z)
+    box: np.ndarray  # (3,) Lx, 1, Lz of the contacts/cells.py grid (periodic in x and z)
     ncell: np.ndarray  # (3,) int64 cells per axis
     size: np.ndarray  # (3,) cell edges (d)
     cell_start: np.ndarray  # (C,) int64
@@ -127,7 +127,7 @@ def bed_offset(pb, k, x, y, z):
 @njit(cache=True, _nrt=False, inline="always")
 def end_jump(st, p, length, height, t_hit, bed):
     """A bed impact at t_hit ends grain p's flight (length, height in d): a jump if it
-    was one (jumps.py)."""
+    was one (bed/jumps.py)."""
     close_jump(st, p, st.jump_t0[p], length, height, t_hit, bed[BED_MIN_JUMP_DURATION], bed[BED_MIN_JUMP_HEIGHT])
 
 
@@ -183,7 +183,7 @@ def _push_out(pb, pos):
     """Move the grain radially out of every bed sphere it overlaps (Gauss–Seidel);
     returns True when it overlapped any."""
     touched = False
-    for sweep in range(PUSH_SWEEPS):
+    for _sweep in range(PUSH_SWEEPS):
         moved = False
         ix, iz = bed_cell(pb, pos[0], pos[2])
         for s in range(9):
@@ -226,7 +226,7 @@ def packed_bed_check_particle(st, w, p, t, dt, step, coef_bed, pb, last_contact)
     n = w.normal[p]
     remaining = dt
     hits = 0
-    for it in range(MAX_BOUNCES):
+    for _it in range(MAX_BOUNCES):
         k, tau = _nearest_entry(pb, pos[0], pos[1], pos[2], vel[0], vel[1], vel[2], remaining, 1.0)
         if k < 0:
             break
@@ -262,7 +262,7 @@ def packed_bed_check_particle(st, w, p, t, dt, step, coef_bed, pb, last_contact)
                 end_jump(st, p, xh - st.jump_x0[p], st.jump_ymax[p] - RADIUS, t_hit, coef_bed)
             st.jump_t0[p] = t_hit
             st.jump_x0[p] = xh
-        history_mark_impact(st.hist_meta[p])  # the next step takes the slip step (history.py)
+        history_mark_impact(st.hist_meta[p])  # the next step takes the slip step (physics/history.py)
         pos[0] = xh + tau * vel[0]
         pos[1] = yh + tau * vel[1]
         pos[2] = zh + tau * vel[2]

@@ -13,7 +13,7 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from .statistics import DISCARDED_JUMPS
+from ..engine.statistics import DISCARDED_JUMPS
 
 TRACK_COLUMNS = ("particle", "t", "x", "y", "z", "u", "v", "w", "spin_x", "spin_y", "spin_z")
 JUMP_COLUMNS = ("particle", "jump", "t_start", "length", "height", "duration", "velocity", "discarded")
@@ -39,7 +39,7 @@ COLUMN_DOCS = {
     "t_start": ("d/u*", "time of the bed contact the jump started from"),
     "length": ("d", "streamwise distance between the two bed contacts"),
     "height": ("d", "highest elevation of the grain's bottom above the bed top during the jump"),
-    "duration": ("d/u*", "time between the two bed contacts (at least one step: saltation.jumps)"),
+    "duration": ("d/u*", "time between the two bed contacts (at least one step: saltation.bed.jumps)"),
     "velocity": ("u*", "mean streamwise grain velocity U = length / duration"),
     "discarded": ("bool", f"one of the grain's first {DISCARDED_JUMPS} jumps (initial-condition memory, "
                           "Moreno-Casas et al. 2022 §3.2): left out of summary.json's statistics"),
@@ -68,7 +68,7 @@ def schema_with_docs(columns, dtypes, meta: dict | None = None) -> pa.Schema:
 
 def run_metadata(case, kind: str) -> dict:
     """What a reader of a run's Parquet file needs to turn it into SI units."""
-    from . import __version__
+    from .. import __version__
 
     return {"file": kind, "saltation_version": __version__,
             "units": "particle units: lengths in d, velocities in u*, times in d/u*",
@@ -200,7 +200,7 @@ CLUSTER_TRACK_COLUMNS = TRACK_COLUMNS + ("q0", "q1", "q2", "q3", "class_id")
 
 
 class ClusterTrackWriter(ParquetTableWriter):
-    """tracks.parquet of bonded-sphere grains (run_clusters.py): the sphere columns (spin =
+    """tracks.parquet of bonded-sphere grains (engine/composites.py): the sphere columns (spin =
     the grain's angular velocity, world frame, u*/d) plus the orientation quaternion
     q0..q3 (body → world, scalar first) and the grain's Zingg class id (summary.json
     ``shape.class_ids``)."""
@@ -241,7 +241,7 @@ class JumpWriter(ParquetTableWriter):
         first = st.jump_count[idx] - counts  # index of the first buffered jump per grain
         jidx = np.concatenate([np.arange(a, a + k) for a, k in zip(first, counts)])
         length, height, duration = data[:, 1], data[:, 2], data[:, 3]
-        velocity = length / duration  # duration ≥ one step (saltation.jumps)
+        velocity = length / duration  # duration ≥ one step (saltation.bed.jumps)
         self.append(particle=part.astype(np.int32), jump=jidx.astype(np.int32), t_start=data[:, 0], length=length,
                     height=height, duration=duration, velocity=velocity, discarded=jidx < DISCARDED_JUMPS)
         rows.append(np.column_stack([part, jidx, length, height, velocity, duration]))

@@ -1,0 +1,1 @@
+"""Free flight: the RK4 step of spheres and of rigid bonded-sphere composites."""

@@ -1,0 +1,1 @@
+"""The grains: initial conditions and the bonded-sphere shapes of irregular grains."""

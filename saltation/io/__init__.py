@@ -1,0 +1,1 @@
+"""Output: Parquet/ParaView/JSON writers, the progress bar, the run directory."""

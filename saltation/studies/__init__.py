@@ -1,0 +1,1 @@
+"""Batches of runs: concentration/flow sweeps on Dask, the Nino-Garcia validation, settling tests."""
