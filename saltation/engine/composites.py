@@ -1,7 +1,8 @@
 """One saltation run of bonded-sphere grains (issue 6 item 5; seed 000 §2.4, §4.4).
 
 ``saltation.run()`` hands a case here when ``particle.shape`` is not "sphere". The run
-mirrors engine/simulation.py's :class:`~saltation.engine.simulation.Simulation`: the same case keys, flow, time step,
+is engine/simulation.py's :class:`~saltation.engine.simulation.Simulation` with another grain
+family: the same case keys, flow, time step,
 force switches and coefficients, initial conditions (grains/initial.py), bed (virtual bed,
 flight/composites.py), jump collection and writers, and a summary.json with the same keys, plus:
 
@@ -40,9 +41,13 @@ separate bed share: ``timing.bed_s`` = 0, said in ``timing.note``) or, with
 bed.model = "packed", the hexagonal layer of fixed spheres of diameter Dn acting on
 every component sphere (bed/packed_composites.py, a pass after each step, timed as bed_s).
 
-Not here (clear errors instead): binary hard-sphere contacts for composites
-(collisions.model = "hard"), checkpoints and --resume. ParaView output holds the
-centres of mass (diameter = Dn).
+The run loop — chunked stepping, recorders, checkpoints (every output.checkpoint_every s,
+every 5 % of the steps, on SIGINT/SIGTERM), ``--resume`` bit for bit, progress, summary —
+is engine/simulation.py's; this family supplies its state (flight/composites.ClusterState
+and its work arrays; the contact state and packed-bed slots go into the checkpoint whole),
+its step and its track columns. Not here (a clear error instead): binary hard-sphere
+contacts for composites (collisions.model = "hard"). ParaView output holds the centres of
+mass (diameter = Dn).
 """
 from __future__ import annotations
 
@@ -50,26 +55,24 @@ import math
 import time
 from pathlib import Path
 
-import numba
 import numpy as np
 import pandas as pd
 
 from ..bed import packed_composites as cluster_bed
 from ..bed.packed import make_packed_bed
 from ..bed.virtual import run_bed_parameters
-from ..case.schema import Case, CaseError, dump_toml
+from ..case.schema import Case, CaseError
 from ..contacts import composites as cluster_contacts
 from ..contacts.pairs import contact_model_from_case
 from ..flight import composites as clusters
 from ..grains import shapes
 from ..grains.initial import Y_RANGE, initial_conditions
-from ..io.writers import ClusterTrackWriter, JumpWriter, ParaViewWriter, run_metadata, write_json, write_table
+from ..io.writers import ClusterTrackWriter, run_metadata, write_table
 from ..physics import history
 from ..physics.forces import CM, make_coefficients
+from .simulation import Simulation, SimulationError
 from .statistics import DISCARDED_JUMPS, empty_rows, jump_statistics
 
-CHUNK_STEPS = 200
-SERIAL_BELOW = 2000
 CLASS_IDS = {c: i for i, c in enumerate(shapes.CLASSES)}  # track column class_id
 MIN_START_BOTTOM = Y_RANGE[0] - 0.5  # d: lowest start of a sphere's bottom (grains/initial.py)
 JUMP_CAPACITY = 16
@@ -110,19 +113,25 @@ def draw_grains(case: Case, n: int):
     return classes, axes, [shapes.build(*a) for a in axes]
 
 
-class ClusterSimulation:
-    """One run of bonded-sphere grains; ``run()`` drives it to the end (module docstring)."""
+class ClusterSimulation(Simulation):
+    """One run of bonded-sphere grains: the run loop, checkpoints and resume of
+    :class:`~saltation.engine.simulation.Simulation`, with this family's state, step and
+    output columns (module docstring)."""
 
-    def __init__(self, case: Case, flow, out: Path, progress=True, resume=False, notice=None):
-        from .simulation import SimulationError
+    TRACK_WRITER = ClusterTrackWriter
+    STATE = clusters.ClusterState
 
+    def __init__(self, case: Case, flow, out: Path, progress=True, resume=False, stop_after_steps=None,
+                 notice=None):
         self.notice = notice  # progress.compile_notice of the run, told when the kernels are compiled
-
-        if resume:
-            raise SimulationError(f'--resume is not available for bonded-sphere runs (particle.shape = '
-                                  f'"{case.particle.shape}"): run without it to start afresh')
         check_case(case)
         self.case, self.flow, self.out, self.progress = case, flow, Path(out), progress
+        self.resume = resume
+        self.stop_after_steps = stop_after_steps  # a test hook: a SIGINT once that many steps are done
+        self._signal = None
+        self._writing = False
+        self._second_signal = False
+        self._saved = None  # a checkpoint's contact and bed arrays, restored by _start
         self.n = int(case.n_particles)
         d = case.particle.diameter
         lx, lz, _ = case.domain
@@ -153,12 +162,6 @@ class ClusterSimulation:
         self.timers = np.zeros(2)
 
     # ------------------------------------------------------------------ set-up
-    def threads(self) -> int:
-        most = numba.config.NUMBA_NUM_THREADS
-        if self.case.run.threads:
-            return min(self.case.run.threads, most)
-        return 1 if self.n < SERIAL_BELOW else most
-
     def _initial_state(self):
         c = self.case
         pos, vel, spin = initial_conditions(self.n, self.domain_d, c.run.seed, c.run.release_height)
@@ -196,7 +199,7 @@ class ClusterSimulation:
         self.n_sub = cluster_contacts.substeps(st, kn, self.dt, cc.steps_per_contact)
         self.mu_min = float(cluster_contacts.point_effective_masses(st).min())
 
-    def _advance(self, f, st, w, seed, t0, n):
+    def _advance_composites(self, f, st, w, seed, t0, n):
         if self.pb is None:
             return self._advance_flight(f, st, w, seed, t0, n)
         # packed bed: after each step's move (free flight, contacts), bed/packed_composites.py
@@ -250,19 +253,14 @@ class ClusterSimulation:
         out[:, 1] = bottom + placed[:, 1]
         return out
 
-    # ------------------------------------------------------------------ main loop
-    def run(self):
-        from ..analysis.variance import AnalysisError, RunVariance
-        from ..io.progress import progress_bar
-        from .simulation import VARIANCE_FILE, RunResult, SimulationError
-
-        c = self.case
-        self.out.mkdir(parents=True, exist_ok=True)
-        (self.out / "config.toml").write_text(dump_toml(c))
-        numba.set_num_threads(self.threads())
-        threads = numba.get_num_threads()
+    # ------------------------------------------------------------------ the family's part of the run loop
+    def _new_state(self):
         st = self._initial_state()
-        w = clusters.make_cluster_work(st)
+        return st, clusters.make_cluster_work(st)
+
+    def _start(self, st, resumed: bool):
+        """Contacts and packed bed for the state; on resume their arrays from the checkpoint
+        (the contact state whole: its lists may have grown)."""
         if self.contacts:
             self._contact_setup(st)
         if self.packed:
@@ -271,81 +269,42 @@ class ClusterSimulation:
                 self.pb = make_packed_bed(lx, lz, cluster_bed.cut_for(st))
             except ValueError as err:
                 raise CaseError(str(err), "run", "domain") from err
-        f = self.flow.arrays
-        d, ts = c.particle.diameter, c.time_scale
-        jw = JumpWriter(self.out / "jumps.parquet", meta=run_metadata(c, "jumps"))
-        tw = ClusterTrackWriter(self.out / "tracks.parquet", meta=run_metadata(c, "tracks")) if c.output.tracks else None
-        vw = ParaViewWriter(self.out, d) if c.output.vtk else None
-        var = None
-        if c.output.variance and self.n >= 2:
-            try:
-                var = RunVariance(self.n, self.n_steps, c.variance_every, self.dt, c.output.variance_origins)
-            except AnalysisError:
-                var = None
-        if var is None:
-            (self.out / VARIANCE_FILE).unlink(missing_ok=True)
-        every = [e for e, wr in ((c.tracks_every, tw), (c.vtk_every, vw)) if wr is not None] + [CHUNK_STEPS]
-        seed = int(c.run.seed)
-        wall0 = time.perf_counter()
-        t_compile = time.perf_counter()
-        self._advance(f, st, w, seed, 0.0, 0)  # compiles (zero steps)
-        if self.notice is not None:
-            self.notice.done()
-        compile_s = time.perf_counter() - t_compile
-        kernel_s = 0.0
-        status = "completed"
-        step = 0
-        rows: list = []
-        idx = np.arange(self.n)
-        bar = progress_bar(self.n_steps, desc=c.run.name or "run", enabled=self.progress)
+        if resumed:
+            saved = self._saved
+            if self.cc is not None:
+                self.cc = cluster_contacts.ClusterContacts(
+                    *[np.ascontiguousarray(saved[f"contacts.{k}"]) for k in cluster_contacts.ClusterContacts._fields])
+            self.last_contact[:] = saved["last_contact"]
+            self.timers[:] = saved["timers"]
+            self.bed_s = float(saved["bed_s"][0])
 
-        def output(s):
-            t = s * self.dt
-            if tw is not None and s % c.tracks_every == 0:
-                tw.write(t, idx, st.pos, st.vel, st.omega, st.quat, self.class_id)
-            if vw is not None and s % c.vtk_every == 0:
-                vw.write(t * ts, st.pos * d, st.vel * (d / ts), st.omega / ts)
-            if var is not None:
-                var.sample_step(s, st.pos)
+    def _advance(self, f, st, ws, t0, n, step0) -> int:
+        return self._advance_composites(f, st, ws, int(self.case.run.seed), t0, n)
 
-        try:
-            output(0)
-            while step < self.n_steps:
-                nxt = min([self.n_steps] + [(step // e + 1) * e for e in every]
-                          + [s for s in [var.next_step(step) if var is not None else None] if s is not None])
-                t0 = time.perf_counter()
-                done = self._advance(f, st, w, seed, step * self.dt, nxt - step)
-                kernel_s += time.perf_counter() - t0
-                jw.collect(st, rows)
-                if np.any(st.status == clusters.NOT_FINITE):
-                    status = "failed"
-                    p = int(np.nonzero(st.status == clusters.NOT_FINITE)[0][0])
-                    raise SimulationError(
-                        f"grain {p} ({self.classes[p]}) became non-finite during step {step + done}: position "
-                        f"{st.pos[p].tolist()}, velocity {st.vel[p].tolist()}, angular velocity "
-                        f"{st.omega[p].tolist()}; outputs up to here are kept in {self.out}")
-                step += done
-                bar.update(done)
-                if step == nxt:
-                    output(step)
-        except KeyboardInterrupt:
-            status = "interrupted"
-            raise
-        finally:
-            bar.close()
-            jw.close()
-            if tw is not None:
-                tw.close()
-            if vw is not None:
-                vw.close()
-            wall = time.perf_counter() - wall0
-            summary = self._summary(st, rows, step, wall, compile_s, kernel_s, threads, status)
-            if var is not None:
-                var.write(self.out / VARIANCE_FILE)
-                summary["variance"] = var.summary()
-            write_json(self.out / "summary.json", summary)
-            self._write_particles(st)
-        return RunResult(self.out, summary)
+    def _write_tracks(self, tw, t, idx, st):
+        tw.write(t, idx, st.pos, st.vel, st.omega, st.quat, self.class_id)
+
+    @staticmethod
+    def _angular_velocity(st):
+        return st.omega
+
+    def _family_arrays(self, st, ws) -> dict:
+        out = {f"work.{k}": v for k, v in ws._asdict().items()}
+        if self.cc is not None:
+            out.update({f"contacts.{k}": v for k, v in self.cc._asdict().items()})
+        out.update(last_contact=self.last_contact, timers=self.timers, bed_s=np.array([self.bed_s]))
+        return out
+
+    def _restore_family(self, st, data: dict):
+        self._saved = data
+        return clusters.ClusterWork(*[np.ascontiguousarray(data[f"work.{k}"]) for k in clusters.ClusterWork._fields])
+
+    def _fail(self, st, step_base, steps_done):
+        p = int(np.nonzero(st.status == clusters.NOT_FINITE)[0][0])
+        raise SimulationError(
+            f"grain {p} ({self.classes[p]}) became non-finite during step {step_base + steps_done}: position "
+            f"{st.pos[p].tolist()}, velocity {st.vel[p].tolist()}, angular velocity "
+            f"{st.omega[p].tolist()}; outputs up to here are kept in {self.out}")
 
     # ------------------------------------------------------------------ outputs
     def _write_particles(self, st):

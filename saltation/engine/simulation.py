@@ -23,7 +23,7 @@ import pandas as pd
 
 from ..bed.virtual import run_bed_parameters
 from ..case.schema import Case, dump_toml, load_case, resolve_domain
-from ..flight.spheres import NOT_FINITE, make_state, make_workspace
+from ..flight.spheres import NOT_FINITE, GrainState, make_state, make_workspace
 from ..grains.initial import initial_conditions, initial_conditions_apart
 from ..io.progress import compile_notice
 from ..io.run_directory import CHECKPOINT_NAME
@@ -133,7 +133,7 @@ def run(case, out=None, progress=True, resume=False, overwrite=False, **override
             compile_notice(progress, family) as notice:  # set-up and the first kernel call compile
         ds = open_flow(case)
         case = resolve_domain(case, _les_box_m(ds, case) if case.flow.source == "les" else None)
-        if family == "composites":  # bonded-sphere grains (issue 6): engine/composites.py
+        if family == "composites":  # bonded-sphere grains: the same run loop, another family
             from .composites import ClusterSimulation
 
             return ClusterSimulation(case, ds, out, progress=progress, resume=resume, notice=notice).run()
@@ -217,6 +217,49 @@ class Simulation:
             f"velocity {st.vel[p].tolist()}, spin {st.spin[p].tolist()}; outputs up to here are kept in {self.out}"
         )
 
+    # ------------------------------------------------------------------ the grain family
+    # What a family of grains (spheres here, bonded-sphere composites in
+    # engine/composites.py) supplies to the one run loop below: its state, its compiled
+    # step, its output columns and the arrays a checkpoint must keep.
+    TRACK_WRITER = TrackWriter
+    STATE = GrainState  # the state's NamedTuple class
+
+    def _new_state(self):
+        """(state, workspace) at t = 0."""
+        return self._initial_state(), make_workspace(self.n)
+
+    def _start(self, st, resumed: bool):
+        """Set up what the step needs besides the state (contact lists, bed), restoring
+        what a checkpoint holds when ``resumed``."""
+        self.stepper.start(st.pos)
+        if resumed and self._stepper_arrays:
+            self.stepper.load_state_arrays(self._stepper_arrays, st.pos)
+
+    def _advance(self, f, st, ws, t0, n, step0) -> int:
+        """n steps from t0 (global step index step0); returns the steps done."""
+        return self.stepper.advance(f, st, ws, t0, n, step0)
+
+    def _write_tracks(self, tw, t, idx, st):
+        tw.write(t, idx, st.pos, st.vel, st.spin)
+
+    @staticmethod
+    def _angular_velocity(st):
+        return st.spin
+
+    def _family_arrays(self, st, ws) -> dict:
+        """Arrays besides the state a checkpoint keeps (workspace, contacts, bed)."""
+        out = {f"fluid.{k}": getattr(ws, k) for k in FLUID_FIELDS}
+        out.update({f"stepper.{k}": v for k, v in self.stepper.state_arrays().items()})
+        return out
+
+    def _restore_family(self, st, data: dict):
+        """The workspace from a checkpoint's arrays (the rest is restored by _start)."""
+        ws = make_workspace(self.n)
+        for k in FLUID_FIELDS:
+            getattr(ws, k)[...] = data[f"fluid.{k}"]
+        self._stepper_arrays = {k[len("stepper."):]: v for k, v in data.items() if k.startswith("stepper.")}
+        return ws
+
     # ------------------------------------------------------------------ main loop
     def run(self) -> RunResult:
         from ..io.progress import progress_bar
@@ -237,17 +280,15 @@ class Simulation:
         if ckpt:
             st, ws, rows = ckpt[1], ckpt[2], ckpt[3]
         else:
-            st, ws, rows = self._initial_state(), make_workspace(self.n), []
-        self.stepper.start(st.pos)
-        if ckpt and self._stepper_arrays:
-            self.stepper.load_state_arrays(self._stepper_arrays, st.pos)
+            (st, ws), rows = self._new_state(), []
+        self._start(st, resumed=ckpt is not None)
         f = self.flow.arrays
         d, ts = c.particle.diameter, c.time_scale
         parts = self.out / PARTS
         jw = JumpWriter(self.out / "jumps.parquet", parts=parts, first_part=meta.get("jump_parts", 0),
                         meta=run_metadata(c, "jumps"))
-        tw = (TrackWriter(self.out / "tracks.parquet", parts=parts, first_part=meta.get("track_parts", 0),
-                          meta=run_metadata(c, "tracks")) if c.output.tracks else None)
+        tw = (self.TRACK_WRITER(self.out / "tracks.parquet", parts=parts, first_part=meta.get("track_parts", 0),
+                                meta=run_metadata(c, "tracks")) if c.output.tracks else None)
         vw = None
         if c.output.vtk:
             vw = ParaViewWriter(self.out, d, frames=meta.get("vtk_frames"))
@@ -258,7 +299,7 @@ class Simulation:
         var = self._variance(resume_step=meta["step"] if ckpt else None)  # diffusion statistics (SPEC §6)
         wall0 = time.perf_counter() - meta.get("wall_s", 0.0)
         t_compile = time.perf_counter()
-        self.stepper.advance(f, st, ws, 0.0, 0, 0)  # compiles (zero steps)
+        self._advance(f, st, ws, 0.0, 0, 0)  # compiles (zero steps)
         if self.notice is not None:
             self.notice.done()
         compile_s = time.perf_counter() - t_compile + meta.get("compile_s", 0.0)
@@ -271,9 +312,9 @@ class Simulation:
         def output(step_now):
             t = step_now * self.dt
             if tw is not None and step_now % track_every == 0:
-                tw.write(t, particle_idx, st.pos, st.vel, st.spin)
+                self._write_tracks(tw, t, particle_idx, st)
             if vw is not None and step_now % vtk_every == 0:
-                vw.write(t * ts, st.pos * d, st.vel * (d / ts), st.spin / ts)
+                vw.write(t * ts, st.pos * d, st.vel * (d / ts), self._angular_velocity(st) / ts)
             if var is not None:
                 var.sample_step(step_now, st.pos)
 
@@ -293,7 +334,7 @@ class Simulation:
                           + [s for s in [var.next_step(step) if var is not None else None] if s is not None])
                 t0 = time.perf_counter()
                 want = nxt - step
-                done = self.stepper.advance(f, st, ws, step * self.dt, want, step)
+                done = self._advance(f, st, ws, step * self.dt, want, step)
                 kernel_s += time.perf_counter() - t0
                 jw.collect(st, rows)
                 if np.any(st.status == NOT_FINITE):
@@ -418,9 +459,8 @@ class Simulation:
         """Everything the loop needs to go on bit for bit, written atomically (tmp + rename)
         after the Parquet parts it counts are closed."""
         arrays = {f"state.{k}": v for k, v in st._asdict().items()}
-        arrays.update({f"fluid.{k}": getattr(ws, k) for k in FLUID_FIELDS})
+        arrays.update(self._family_arrays(st, ws))
         arrays["jump_rows"] = np.concatenate(rows) if rows else empty_rows()
-        arrays.update({f"stepper.{k}": v for k, v in self.stepper.state_arrays().items()})
         if var is not None:
             arrays.update({f"variance.{k}": v for k, v in var.state_arrays().items()})
         meta = {
@@ -445,8 +485,6 @@ class Simulation:
     def _read_checkpoint(self):
         """(meta, GrainState, Workspace, jump rows) from out/checkpoint.npz; the case must be
         the one that wrote it (output.checkpoint_*, output.directory, run.threads may differ)."""
-        from ..flight.spheres import GrainState
-
         path = self.out / CHECKPOINT
         if not path.exists():
             done = self.out / "summary.json"
@@ -473,12 +511,9 @@ class Simulation:
                 f"cannot resume from {path}: the case differs from the one that wrote it in "
                 + ", ".join(f"{k} (checkpoint {meta['case'].get(k)!r}, now {now.get(k)!r})" for k in changed)
                 + "; only output.checkpoint_every, output.checkpoint_steps, output.directory and run.threads may change")
-        st = GrainState(*[np.ascontiguousarray(data[f"state.{k}"]) for k in GrainState._fields])
-        ws = make_workspace(self.n)
-        for k in FLUID_FIELDS:
-            getattr(ws, k)[...] = data[f"fluid.{k}"]
+        st = self.STATE(*[np.ascontiguousarray(data[f"state.{k}"]) for k in self.STATE._fields])
+        ws = self._restore_family(st, data)
         rows = [data["jump_rows"]] if len(data["jump_rows"]) else []
-        self._stepper_arrays = {k[len("stepper."):]: v for k, v in data.items() if k.startswith("stepper.")}
         self._variance_arrays = {k[len("variance."):]: v for k, v in data.items() if k.startswith("variance.")}
         return meta, st, ws, rows
 
