@@ -11,7 +11,7 @@ dt = t_c/20 (SPEC §5's coarsest resolution), a neighbour skin of 0.3 d checked 
 step. LAMMPS: serial ``lmp`` (one MPI rank), ``pair_style gran/hooke/history`` +
 ``fix nve/sphere``, ``neighbor SKIN bin``, ``neigh_modify delay 0 every 1 check yes``;
 its speed is its own "Loop time" (set-up and file reading excluded). Ours:
-``contacts.advance_granular`` (velocity Verlet, contact forces, neighbour list with the
+``contacts.pairs.advance_granular`` (velocity Verlet, contact forces, neighbour list with the
 same skin and criterion) on 1 and 2 Numba threads, timed after a warm-up (compile time
 reported apart).
 

@@ -15,7 +15,7 @@ process pinned to one core by running it serially; ours on one Numba thread):
 (a) free flight: drag + submerged weight + wall rebound, nothing else.
     OpenFOAM: ``sphereDrag`` + ``gravity``, ``standardWallInteraction`` (type rebound,
     e and μ of our bed), Euler integration, ``cellPoint`` interpolation of a frozen LES
-    velocity field (one snapshot). Ours: ``integrator.advance`` (RK4) with
+    velocity field (one snapshot). Ours: ``advance`` (tests/peers/sphere_advance.py: RK4) with
     ``[forces]`` drag and weight on, lift, Magnus, added mass, fluid acceleration,
     Basset and the free-flight spin law off (OpenFOAM's parcels carry no spin; with none
     of these on, our kernel takes its weight-and-drag path: the fluid velocity alone,
@@ -35,7 +35,7 @@ process pinned to one core by running it serially; ours on one Numba thread):
     ``pairSpringSliderDashpot`` (and ``wallSpringSliderDashpot`` for the walls, which
     pairCollision requires); it sub-cycles the whole cloud (tracking, forces and
     contacts) ``nSubCycles`` times per step. Ours: ``ours_contacts`` (RK4 free flight,
-    then every grain sub-stepped through the contacts with contacts.advance_granular —
+    then every grain sub-stepped through the contacts with contacts.pairs.advance_granular —
     as OpenFOAM sub-steps every grain) and, when the run loop has contacts
     (``saltation.engine.stepping.Stepper``), ``ours_run_loop`` (sub-steps only the grains that
     can touch within the step). Same non-overlapping initial grains on all sides.
@@ -84,6 +84,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "tests" / "peers"))  # sphere_advance: the flight-and-bed loop
 
 from flowfields.openfoam import foam_header, openfoam_env  # noqa: E402
 
@@ -449,14 +450,15 @@ def _simulation(case, n):
 
 
 def ours_free(case, pos, u0_particle, n_steps, warm_steps=5, frozen=False):
-    """Free flight (a): ``integrator.advance`` on one thread. Returns timings.
+    """Free flight (a): ``advance`` (tests/peers/sphere_advance.py) on one thread. Returns timings.
 
     ``frozen``: sample only the dataset's first snapshot (a steady field, as OpenFOAM's
     frozen U; the same arithmetic — the time blend of one snapshot with itself — on
     1/62 of the data, so this isolates the memory traffic of the time series)."""
     import numba
+    from sphere_advance import advance
 
-    from saltation.flight.spheres import advance, make_state, make_workspace
+    from saltation.flight.spheres import make_state, make_workspace
 
     numba.set_num_threads(1)
     n = len(pos)
@@ -497,8 +499,8 @@ def ours_contacts(case, pos, u0_particle, n_steps, skin=0.3, warm_steps=2):
     """Free flight (a) plus soft grain–grain contacts, one thread.
 
     Each hydrodynamic step dt: (1) the RK4 free-flight step of every grain
-    (``integrator.advance``, bed rebounds included); (2) the contacts, resolved in
-    ``contact_substeps`` sub-steps of velocity Verlet (``contacts.advance_granular``,
+    (``advance``, tests/peers/sphere_advance.py, bed rebounds included); (2) the contacts, resolved in
+    ``contact_substeps`` sub-steps of velocity Verlet (``contacts.pairs.advance_granular``,
     LAMMPS-exact gran/hooke/history, neighbour list with a skin) from the start-of-step
     state, with each grain's free-flight acceleration of the step, (v_RK4 − v₀)/dt, held
     as an external acceleration and its spin after the RK4 step; (3) grains that touched
@@ -507,9 +509,10 @@ def ours_contacts(case, pos, u0_particle, n_steps, skin=0.3, warm_steps=2):
     module describes; it sub-steps every grain (as OpenFOAM does), not only those near
     another. Returns timings, split into free flight and contacts."""
     import numba
+    from sphere_advance import advance
 
     from saltation.contacts import pairs as C
-    from saltation.flight.spheres import advance, make_state, make_workspace
+    from saltation.flight.spheres import make_state, make_workspace
 
     numba.set_num_threads(1)
     n = len(pos)

@@ -15,14 +15,14 @@ virtual bed). Grains start as in ``saltation/grains/initial.py`` (near the bed, 
 velocities); a population of ``--spinup-grains`` is first run for ``--spinup`` d/u* so
 that it is mid-saltation (grains at every phase of their jumps, bed impacts included),
 then tiled to N grains with random streamwise/spanwise shifts. The kernel
-``integrator.advance`` is driven directly. Each figure is the best of ``--repeat``
+``advance`` (tests/peers/sphere_advance.py) is driven directly. Each figure is the best of ``--repeat``
 timings of about ``--work`` particle-steps (wall clock; the process CPU time is given
 too, a steadier figure on a shared machine); compile time (the first call: a full
 compile with ``--fresh-cache``, else mostly a load from Numba's cache) is reported apart.
 
 Breakdown (1 thread, N = --breakdown-n), in µs per particle-step: the whole step, then
 each part of its work run alone on the same grains — the four fluid samples of a step
-(``flow.fluid_at_grain``: centre with gradient, top and bottom), the four force and
+(``physics.fluid.fluid_at_grain``: centre with gradient, top and bottom), the four force and
 spin evaluations, the Basset closure — and the rest (RK4 bookkeeping, state traffic,
 NaN checks, bed impacts) by difference; then the whole step with lift off, Basset off,
 both off, in a steady single-snapshot log-law flow and in still fluid.
@@ -54,7 +54,7 @@ from flowfields.dataset import DatasetError, write_dataset  # noqa: E402
 from saltation.bed.virtual import run_bed_parameters  # noqa: E402
 from saltation.case.schema import load_case, resolve_domain  # noqa: E402
 from saltation.engine.simulation import _les_box_m  # noqa: E402
-from saltation.flight.spheres import GrainState, advance, make_state, make_workspace  # noqa: E402
+from saltation.flight.spheres import GrainState, make_state, make_workspace  # noqa: E402
 from saltation.grains.initial import initial_conditions  # noqa: E402
 from saltation.physics import history  # noqa: E402
 from saltation.physics.fluid import fluid_at_grain  # noqa: E402
@@ -68,6 +68,9 @@ from saltation.physics.forces import (  # noqa: E402
 )
 from saltation.physics.history import history_end_step  # noqa: E402
 from saltation.physics.spin import spin_rate  # noqa: E402
+
+sys.path.insert(0, str(ROOT / "tests" / "peers"))
+from sphere_advance import advance  # noqa: E402  (tests/peers: the flight-and-bed loop without contacts)
 
 CASE = ROOT / "cases" / "default.toml"
 

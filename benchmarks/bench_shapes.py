@@ -11,7 +11,9 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 import time
+from pathlib import Path
 
 import numba
 import numpy as np
@@ -23,6 +25,9 @@ from saltation.flight import spheres as integrator
 from saltation.grains import shapes
 from saltation.physics import history
 from saltation.physics.forces import CM, make_coefficients
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "peers"))
+from sphere_advance import advance  # noqa: E402  (tests/peers: the flight-and-bed loop without contacts)
 
 
 def main(argv=None):
@@ -47,9 +52,9 @@ def main(argv=None):
     f = ds.arrays
     st = integrator.make_state(pos, vel, spin, 0.0, nw)
     w = integrator.make_workspace(n)
-    integrator.advance(f, coef, bed, 0, st, w, hc, 0.0, dt, 1, top)
+    advance(f, coef, bed, 0, st, w, hc, 0.0, dt, 1, top)
     t0 = time.perf_counter()
-    integrator.advance(f, coef, bed, 0, st, w, hc, dt, dt, a.steps, top)
+    advance(f, coef, bed, 0, st, w, hc, dt, dt, a.steps, top)
     t_sph = time.perf_counter() - t0
     comps = [c.scaled(1.0 / c.nominal_diameter) for c in shapes.mixture(n, Dn=1e-3, seed=1)]
     quat = rng.normal(size=(n, 4))

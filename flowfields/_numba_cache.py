@@ -25,11 +25,15 @@ from pathlib import Path
 
 _done = False
 PACKAGES = ("flowfields", "saltation")
+# kernels outside the packages that call theirs (tests/peers, tests, benchmarks) get the same stamp
+STAMPED = PACKAGES + ("tests", "benchmarks")
 ROOT = Path(__file__).resolve().parents[1]
 _KERNEL = re.compile(r"^\s*@(numba\.)?(njit|jit|vectorize|guvectorize)\b", re.M)
 # in-package imports: "from .x import", "from ..x import", "from . import x, y", "from saltation.x import"
 _FROM = re.compile(r"^\s*from\s+(\.+)([\w.]*)\s+import\s+(\([^)]*\)|[^\n]+)", re.M)
 _ABS = re.compile(r"^\s*(?:from|import)\s+((?:flowfields|saltation)(?:\.\w+)*)", re.M)
+# "from saltation.physics import history": a submodule named after "import"
+_ABS_FROM = re.compile(r"^\s*from\s+((?:flowfields|saltation)(?:\.\w+)*)\s+import\s+(\([^)]*\)|[^\n]+)", re.M)
 
 
 def _module_file(root: Path, dotted: str) -> Path | None:
@@ -49,10 +53,11 @@ def _imports(root: Path, path: Path) -> set[Path]:
         up = pkg[: len(pkg) - (len(dots) - 1)] if len(dots) > 1 else pkg
         target = ".".join(up + tuple(p for p in mod.split(".") if p))
         for name in re.sub(r"#.*|[()]", " ", names).split(","):
-            sub = _module_file(root, f"{target}.{name.strip()}") if name.strip() and target else None
+            name = (name.split() or [""])[0]  # "composites as clusters": composites
+            sub = _module_file(root, f"{target}.{name}") if name and target else None
             if sub is not None:  # "from . import history": the submodule
                 found.add(sub)
-            elif name.strip() and target:  # a name defined in the module (or package) itself
+            elif name and target:  # a name defined in the module (or package) itself
                 f = _module_file(root, target)
                 if f is not None:
                     found.add(f)
@@ -63,6 +68,12 @@ def _imports(root: Path, path: Path) -> set[Path]:
             if f is not None:
                 found.add(f)
                 break
+    for mod, names in _ABS_FROM.findall(text):
+        for name in re.sub(r"#.*|[()]", " ", names).split(","):
+            name = (name.split() or [""])[0]
+            sub = _module_file(root, f"{mod}.{name}") if name else None
+            if sub is not None:
+                found.add(sub)
     return found
 
 
@@ -133,7 +144,7 @@ def _locator_class():
                 Path(py_file).resolve().relative_to(ROOT)
             except ValueError:
                 return None  # not ours: Numba's own locators decide
-            if Path(py_file).resolve().relative_to(ROOT).parts[0] not in PACKAGES:
+            if Path(py_file).resolve().relative_to(ROOT).parts[0] not in STAMPED:
                 return None
             return super().from_function(py_func, py_file)
 

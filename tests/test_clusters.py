@@ -2,6 +2,8 @@
 integrator; torque-free rotation conserves L and energy; shear exerts a torque; bed
 impacts never create energy."""
 import math
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -13,6 +15,9 @@ from saltation.flight import spheres as integrator
 from saltation.grains import shapes
 from saltation.physics import history
 from saltation.physics.forces import make_coefficients
+
+sys.path.insert(0, str(Path(__file__).resolve().parent / "peers"))
+from sphere_advance import advance  # noqa: E402  (tests/peers: the flight-and-bed loop without contacts)
 
 DT = 0.01
 NW = 10
@@ -40,7 +45,7 @@ def test_one_sphere_grain_is_the_sphere_integrator():
     st = integrator.make_state(pos, vel, spin, 0.0, NW)
     w = integrator.make_workspace(n)
     top = float(ds.y[-1]) / re_star
-    integrator.advance(ds.arrays, coef, BED, 0, st, w, hc, 0.0, DT, 800, top)
+    advance(ds.arrays, coef, BED, 0, st, w, hc, 0.0, DT, 800, top)
     one = shapes.Composite.from_spheres([[0, 0, 0]], [0.5])
     cst, cw = _cluster([one] * n, pos, vel, spin, coef)
     clusters.advance_clusters(ds.arrays, coef, BED, 0, cst, cw, hc, 0.0, DT, 800, top)

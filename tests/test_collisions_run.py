@@ -1,6 +1,6 @@
 """Grain contacts and the packed bed inside the run loop (issue 4; contacts/phase.py, engine/stepping.py,
 bed/packed.py). The binary collision physics itself is tested in test_contacts.py; here:
-the contact phase reproduces contacts.advance_granular on straight free-flight paths, runs
+the contact phase reproduces contacts.pairs.advance_granular on straight free-flight paths, runs
 with contacts keep overlaps small and grains above the bed, contacts change the result,
 and the packed bed rebounds along the real normal and is never penetrated."""
 import math
@@ -41,7 +41,7 @@ def small_case(model="soft", n=400, duration=0.15, bed="virtual", seed=3, source
 
 def test_contact_phase_reproduces_velocity_verlet_on_straight_paths():
     """No fluid force: the free flight is a straight line, so the contact phase (Hermite
-    path + deviation) must give what contacts.advance_granular gives for the same
+    path + deviation) must give what contacts.pairs.advance_granular gives for the same
     sub-steps — same restitution, momentum, spins (the duplicated force arithmetic)."""
     model = K.make_contact_model(5e5, 0.65, 0.3)
     dt, n_sub, steps = 0.02, 128, 6

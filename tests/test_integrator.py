@@ -1,4 +1,7 @@
 """The RK4 grain integrator: settling, zero slip, convergence, bed, reproducibility, NaN."""
+import sys
+from pathlib import Path
+
 import numpy as np
 import pytest
 from scipy.optimize import brentq
@@ -7,9 +10,12 @@ from flowfields.dataset import in_memory_dataset
 from saltation.bed.virtual import bed_parameters
 from saltation.case.schema import load_case
 from saltation.engine.simulation import Simulation, SimulationError, run
-from saltation.flight.spheres import advance, make_state, make_workspace
+from saltation.flight.spheres import make_state, make_workspace
 from saltation.physics import history
 from saltation.physics.forces import make_coefficients, yen_drag_coefficient
+
+sys.path.insert(0, str(Path(__file__).resolve().parent / "peers"))
+from sphere_advance import advance  # noqa: E402  (tests/peers: the flight-and-bed loop without contacts)
 
 
 def uniform_flow(u=(0.0, 0.0, 0.0), y_top=1e6):

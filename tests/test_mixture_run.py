@@ -34,7 +34,7 @@ def test_mixture_run_writes_jumps_tracks_and_per_class_summary(tmp_path):
     # per-class jump statistics partition the counted jumps
     jumps = res.jumps
     assert len(jumps) == s["jumps"]["recorded"] > 0
-    assert (jumps["duration"] > 0).all()  # simultaneous impacts are one event (clusters.SAME_IMPACT_DT)
+    assert (jumps["duration"] > 0).all()  # simultaneous impacts are one event (flight.composites.SAME_IMPACT_DT)
     by = s["jumps_by_class"]
     assert sum(b["count"] for b in by.values()) == s["jumps"]["count"]
     assert sum(b["grains"] for b in by.values()) == 12

@@ -61,3 +61,43 @@ def test_numba_uses_the_closure_stamp_for_our_kernels():
     assert loc.get_cache_path().startswith(numba.config.CACHE_DIR)
     # a function outside the two packages is left to Numba's own locators
     assert locator.from_function(shutil.copy, shutil.__file__) is None
+
+
+def test_every_import_form_of_the_package_layout_is_followed(tmp_path):
+    """Relative and absolute imports of a submodule, with aliases and parenthesized lists."""
+    for rel in ("saltation/__init__.py", "saltation/physics/__init__.py", "saltation/flight/__init__.py",
+                "saltation/physics/history.py", "saltation/physics/spin.py", "saltation/flight/spheres.py"):
+        (tmp_path / rel).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / rel).write_text("")
+    engine = tmp_path / "saltation/engine/run.py"
+    engine.parent.mkdir()
+    engine.write_text("from ..flight import spheres as integrator\n"
+                      "from ..physics import (\n    spin,  # a comment\n)\n")
+    peer = tmp_path / "tests/peers/loop.py"
+    peer.parent.mkdir(parents=True)
+    peer.write_text("from saltation.physics import history as h\n")
+    assert nc._imports(tmp_path, engine) == {tmp_path / "saltation/flight/spheres.py",
+                                             tmp_path / "saltation/physics/spin.py"}
+    assert tmp_path / "saltation/physics/history.py" in nc._imports(tmp_path, peer)  # (and the package)
+    # the real tree: a module imported under another name is in the closure
+    assert _module("saltation.flight.composites") in nc.module_closure(_module("saltation.engine.composites"))
+
+
+def test_a_kernel_in_tests_peers_is_stamped_with_its_closure():
+    """tests/peers/sphere_advance.py calls the flight kernels: an edit to them must not leave
+    it stale in the cache (Numba's own stamp would look at its file only)."""
+    import sys
+
+    from numba.core import caching
+
+    sys.path.insert(0, str(ROOT / "tests" / "peers"))
+    import sphere_advance
+
+    impl = getattr(caching, "CacheImpl", None) or caching._CacheImpl
+    locator = impl._locator_classes[0]
+    py_file = sphere_advance.__file__
+    loc = locator.from_function(sphere_advance.advance.py_func, py_file)
+    assert loc is not None and loc.get_source_stamp() == nc.closure_stamp(Path(py_file))
+    closure = nc.module_closure(Path(py_file).resolve())
+    for dep in ("saltation.flight.spheres", "saltation.physics.forces", "flowfields.sampler"):
+        assert _module(dep) in closure, dep

@@ -21,7 +21,7 @@ the micro-jumps of T ~ 1e-14 d/u* that gave U ~ 1e9 u* cannot occur.
 """
 from numba import njit
 
-# slots of the bed parameter array every bed kernel takes (bed.bed_parameters)
+# slots of the bed parameter array every bed kernel takes (bed.virtual.bed_parameters)
 BED_MIN_JUMP_DURATION = 4
 BED_MIN_JUMP_HEIGHT = 5
 

@@ -25,7 +25,7 @@ with end velocity u: if x₁ lies within one diameter of some bed sphere centres
 time of entry is found by running the move back along u (the same linear back-tracking
 as the virtual bed): τ = the positive root of |x₁ − τu − c| = 1, the largest over the
 spheres overlapped (the first one hit). At the contact point x_h = x₁ − τu the normal is
-n = (x_h − c)/|x_h − c|; SPEC §4's impulse (``bed.rebound``, restitution e, Coulomb
+n = (x_h − c)/|x_h − c|; SPEC §4's impulse (``bed.virtual.rebound``, restitution e, Coulomb
 friction f, spin included) gives the new velocity and spin, and the grain moves on for
 the remaining τ. That is repeated (at most ``MAX_BOUNCES`` times per step) for a second
 sphere hit within τ — a grain deflected off the lee face of one sphere strikes the next.

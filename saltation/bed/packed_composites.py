@@ -6,7 +6,7 @@ unit of composite runs), centres at y = −½, tops at y = 0, found through the 
 distance ½ + d_k/2 of a component). Each component sphere k of a grain meets the bed
 spheres with its own radius; the impulse acts on the rigid body at the real contact
 point along the real normal, with the rigid-body collision matrix of flight/composites.py
-(``clusters._impulse``: Newton restitution e and Coulomb friction f on the contact-point
+(``flight.composites._impulse``: Newton restitution e and Coulomb friction f on the contact-point
 velocity, sticking and sliding branches — SPEC §4's rebound for a sphere).
 
 After a grain's move in a step (free flight, then grain–grain contacts) from its start

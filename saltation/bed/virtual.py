@@ -66,7 +66,7 @@ SECOND_IMPACT = 4        # flag OR-ed into bed_rebound's code; branch = code & 3
 
 MAX_TILT = math.radians(30.0)
 # the bed parameter array every bed kernel takes (bed_parameters): restitution, friction,
-# max tilt (rad), bed model (slot BED_MODEL: 0 virtual, clusters.BED_PACKED), then the jump
+# max tilt (rad), bed model (slot BED_MODEL: 0 virtual, flight.composites.BED_PACKED), then the jump
 # thresholds (slots jumps.BED_MIN_JUMP_DURATION, BED_MIN_JUMP_HEIGHT)
 BED_MODEL = 3
 

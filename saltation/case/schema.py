@@ -409,7 +409,7 @@ class ForcesConfig(_Table):
     wake_shielding: bool = _key(True, kind="bool",
                                 doc="bonded-sphere grains: a component sphere in the wake of "
                                     "another sphere of the same grain feels less drag "
-                                    "(clusters.wake_factor); no effect on spheres")
+                                    "(flight.composites.wake_factor); no effect on spheres")
     added_mass_coefficient: float = _key(0.5, kind="float", ge=0.0, doc="Cm")
     lift_coefficient: float = _key(0.2, kind="float", ge=0.0, doc="C_L")
     magnus_coefficient: float = _key(1.0, kind="float", ge=0.0, doc="C_Ω")

@@ -19,7 +19,7 @@ conserved to round-off.
   v_n = v_r·n, v_t = v_r − v_n n;
 - normal force on i (linear spring–dashpot, Cundall & Strack 1979, no clamping as in
   contacts/pairs.py): F_n = (k_n δ − c_n v_n) n with c_n = 2 √(m_eff k_n) |ln e| / √(ln² e + π²),
-  m_eff = m_i m_j / (m_i + m_j) the grains' reduced rigid mass (contacts.normal_damping
+  m_eff = m_i m_j / (m_i + m_j) the grains' reduced rigid mass (contacts.pairs.normal_damping
   written for a pair of unequal grains). A central impact then rebounds with exactly the
   case's e; an off-centre one feels a smaller point-effective mass (rotation) and
   rebounds a little more elastically — the usual choice for clumped-sphere DEM;
@@ -29,7 +29,7 @@ conserved to round-off.
 - on grain i: F += F_n + F_t, T += (x_c − x_i) × (F_n + F_t); on j the negatives.
 
 k_n, k_t, e and f are the case's [collisions] values, the same as the sphere runs
-(contacts.contact_model_from_case): k_n(ρ u*² units) = k_n(sphere units) · (1+R) π/6,
+(contacts.pairs.contact_model_from_case): k_n(ρ u*² units) = k_n(sphere units) · (1+R) π/6,
 because the sphere code's mass unit is the grain mass ρp (π/6) d³ = (1+R)(π/6) ρ d³. A
 one-sphere composite of d = Dn is therefore the sphere contact exactly.
 
@@ -41,7 +41,7 @@ lightest rod hit sideways — so typical contacts get more sub-steps than asked 
 
 Scheme inside the hydrodynamic step (operator split after the free flight, as contacts/phase.py)
 -----------------------------------------------------------------------------------------
-1. Free flight (clusters.step_grain, RK4 + the virtual bed) takes every grain from its
+1. Free flight (flight.composites.step_grain, RK4 + the virtual bed) takes every grain from its
    start state (x₀, v₀, q₀, Ω₀) (``ClusterWork.x0``) to (x₁, v₁, q₁, Ω₁).
 2. **Engagement**: with D_i = |x₁ − x₀| + Δt(|v₀ − ū| + |v₁ − ū|)/4 a bound on how far the
    centre's free path (cubic Hermite, below) gets from x₀, and ρ_i the grain's bounding
@@ -177,7 +177,7 @@ def point_effective_masses(st, n_dir: int = 200) -> np.ndarray:
 
 
 def damping_factor(restitution: float) -> float:
-    """ζ with c_n = ζ √(m_eff k_n) giving restitution e (contacts.normal_damping)."""
+    """ζ with c_n = ζ √(m_eff k_n) giving restitution e (contacts.pairs.normal_damping)."""
     if not 0.0 < restitution <= 1.0:
         raise ValueError(f"restitution {restitution!r} must be in (0, 1] for a spring–dashpot")
     le = math.log(restitution)
@@ -200,7 +200,7 @@ def substeps(st, kn: float, dt: float, steps_per_contact: int = 20) -> int:
 
 
 def make_cluster_contacts(st, par, capacity: int = 32) -> ClusterContacts:
-    """Contact state for a ClusterState ``st`` (clusters.make_cluster_state)."""
+    """Contact state for a ClusterState ``st`` (flight.composites.make_cluster_state)."""
     n = st.pos.shape[0]
     kt = st.r_body.shape[0]
     grain_of = np.repeat(np.arange(n), np.diff(st.cstart)).astype(np.int64)
@@ -999,7 +999,7 @@ def _free_flight(f, coef, bed, seed, st, w, hc, t, dt, top):
 
 @njit(cache=True)
 def advance_clusters_contacts(f, coef, bed, seed, st, w, hc, t0, dt, n_steps, top, cc, n_sub, timers):
-    """clusters.advance_clusters with grain–grain contacts: free flight (RK4 + bed) of
+    """flight.composites.advance_clusters with grain–grain contacts: free flight (RK4 + bed) of
     every grain, then ``contact_phase``, each step; timers += (free flight s, contacts s).
     Stops early when a grain is not finite or a jump buffer is full. Returns (steps
     done, the ClusterContacts to keep)."""

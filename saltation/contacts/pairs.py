@@ -211,7 +211,7 @@ def make_contact_model(kn, restitution, friction, kt_ratio=2.0 / 7.0, gamma_t=0.
 
 
 def contact_model_from_case(case, mass=1.0, gamma_t=0.0, lever=LEVER_CONTACT_POINT) -> ContactModel:
-    """The soft-contact model of a ``config.Case`` in particle units (d = 1, u* = 1,
+    """The soft-contact model of a ``case.Case`` in particle units (d = 1, u* = 1,
     grain mass = 1): k_n = case.collision_stiffness · d² / (m u*²), k_t = ratio · k_n,
     e and f from ``[collisions]``. ``mass``: inertial mass in grain masses (module
     docstring); the grain's moment of inertia stays 0.1."""

@@ -5,12 +5,12 @@ Operator split
 --------------
 A hydrodynamic step of length Δt (d/u*) is done in three phases, in this order:
 
-1. **free flight** (integrator.free_flight_particles): RK4 with the fluid forces, every
+1. **free flight** (flight.spheres.free_flight_particles): RK4 with the fluid forces, every
    grain on its own, from (x₀, u₀, ϖ₀) to (x₁, u₁, ϖ₁);
 2. **contacts** (this module): the grains that can touch another one during the step are
    moved again through the step in ``n_sub`` sub-steps of h = Δt/n_sub, with the fluid
    force *held* at what the free flight gave it, plus the contact forces;
-3. **bed** (integrator._bed_check_body or packed_bed.packed_bed_check_particle).
+3. **bed** (flight.spheres._bed_check_body or bed.packed.packed_bed_check_particle).
 
 Phase 2 is written as a correction to the free flight. Each grain's free-flight path in
 the step is the cubic Hermite interpolant H(s), s = t/Δt ∈ [0, 1], through (x₀, u₀) and
@@ -67,7 +67,7 @@ would put it into a neighbour it is touching, and the stiff spring would turn th
 overlap into a spurious kick (½ k_n δ² at δ = 0.02 d is a relative speed of ~20 u*).
 Packed bed: the real bed spheres (bed/packed.py), found through its cells. Virtual bed:
 when the grain's bottom first goes below the bed top, a virtual bed sphere is placed
-under it along a random normal (bed.virtual_bed_normal, the same counter-based draw as
+under it along a random normal (bed.virtual.virtual_bed_normal, the same counter-based draw as
 the hard virtual bed) and kept until the contact ends. The first bed contact after at
 least one step off the bed counts as a bed impact and closes a jump (SPEC §6); while the
 contact lasts the next jump's start moves with the grain. Such a grain joins the
@@ -78,7 +78,7 @@ margin, so that such a move never pushes it into a grain it was not sub-stepped 
 Known gap: a grain woken on a deflected path after its own free path went below the bed
 top starts its soft bed contact with that overlap (rare; not counted).
 
-Neighbour list (contacts.ContactList, skin s)
+Neighbour list (contacts.pairs.ContactList, skin s)
 ---------------------------------------------
 Valid while no grain is more than s/2 from where the list was built. Before each
 contact phase the bound ``max(|x₀ − x_ref|, |x₁ − x_ref|) + b`` is checked and the list
@@ -195,7 +195,7 @@ class BedContext(NamedTuple):
     params: np.ndarray  # (9,) packed (0/1), e, f, max tilt (rad), γ_n (m_eff = m), k_n, k_t, jump thresholds
     ints: np.ndarray  # (2,) int64: seed, index of the current step
     t0: np.ndarray  # (1,) start time of the current step (d/u*)
-    centres: np.ndarray  # packed bed (packed_bed.PackedBed, flattened)
+    centres: np.ndarray  # packed bed (bed.packed.PackedBed, flattened)
     box: np.ndarray
     ncell: np.ndarray
     size: np.ndarray
@@ -206,12 +206,12 @@ class BedContext(NamedTuple):
     slot_c: np.ndarray  # (N, S, 3) its centre, in the grain's unwrapped frame
     slot_shear: np.ndarray  # (N, S, 3) tangential spring
     in_bed: np.ndarray  # (N,) uint8 touching the bed at the last evaluation
-    last_contact: np.ndarray  # (N,) int64 last step with bed contact (shared with packed_bed)
+    last_contact: np.ndarray  # (N,) int64 last step with bed contact (shared with bed/packed.py)
 
 
 def make_bed_context(n, packed: bool, pb, restitution, friction, max_tilt, kn, kt, seed, last_contact,
                      min_jump_duration=0.0, min_jump_height=0.0):
-    """BedContext for n grains; pb: a packed_bed.PackedBed (any, when not packed); the
+    """BedContext for n grains; pb: a bed.packed.PackedBed (any, when not packed); the
     jump thresholds as in bed/jumps.py."""
     gamma = normal_damping(restitution, kn, 1.0) if restitution > 0.0 else 2.0 * math.sqrt(kn)
     params = np.array([1.0 if packed else 0.0, restitution, friction, max_tilt, gamma, kn, kt,
@@ -602,7 +602,7 @@ def _bed_force(a, cs, st, bc, s, dt, h, update):
                         used += 1
         elif used == 0:
             # virtual bed: a bed grain of diameter d placed where the grain's bottom
-            # crossed the bed top, its normal tilted at random (bed.virtual_bed_normal)
+            # crossed the bed top, its normal tilted at random (bed.virtual.virtual_bed_normal)
             nrm = cs.nrm[a]
             if cur[a, 4] < 0.0:
                 xi1, xi2 = uniform2(bc.ints[0], cs.gid[a], cs.impacts[a])
@@ -830,7 +830,7 @@ def _engage_kernel(x0w, pos, box, per, nbr, nbr_count, n_touch, in_bed, slot_id,
 @njit(cache=True, parallel=True)
 def _margins(x0w, pos, reach, margin):
     # the hard bed pass moves a grain only when it ends the step with its bottom below the
-    # bed top (y < 1/2), by at most twice its reach (integrator._bed_impact)
+    # bed top (y < 1/2), by at most twice its reach (flight.spheres._bed_impact)
     for i in prange(x0w.shape[0]):
         margin[i] = reach[i] + (2.0 * reach[i] if pos[i, 1] < 0.5 else 0.0)
 

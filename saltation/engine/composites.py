@@ -232,7 +232,7 @@ class ClusterSimulation(Simulation):
         """Start positions for runs with grain–grain contacts: no two bounding spheres
         (radius ρ = max |r_k| + d_k/2 of the largest grain) overlap, so no components
         do (an overlapping start would be a violent first contact). Random sequential
-        insertion (contacts.random_gas) in a layer from the usual lowest start (or
+        insertion (contacts.pairs.random_gas) in a layer from the usual lowest start (or
         run.release_height) + ρ up, tall enough for a solid fraction of bounding spheres
         of SOLID_FRACTION_AT_START (grains/initial.py); x, z as drawn there."""
         from ..contacts.pairs import random_gas
@@ -482,7 +482,7 @@ class ClusterSimulation(Simulation):
     def _timing(self, wall, compile_s, kernel_s, threads):
         bed_s = self.bed_s
         where = ("the packed bed: its own pass after each step (bed/packed_composites.py), bed_s" if self.packed else
-                 "bed rebounds are computed inside the free-flight kernel (clusters.step_grain)")
+                 "bed rebounds are computed inside the free-flight kernel (flight.composites.step_grain)")
         if self.cc is None:
             return {"wall_s": wall, "compile_s": compile_s, "kernel_s": kernel_s, "free_flight_s": kernel_s - bed_s,
                     "bed_s": bed_s, "particle_collisions_s": 0.0, "threads": threads, "note": where}

@@ -66,7 +66,7 @@ CHUNK_STEPS = 200  # longest stretch between two chunk ends (how soon a signal i
 # besides every output.checkpoint_every s of wall time: a checkpoint each time the run has
 # advanced by this fraction of its steps, so a kill -9 loses at most 5 % of a run
 CHECKPOINT_FRACTION = 0.05
-# the fluid seen at each grain is carried from one step to the next (integrator.Workspace)
+# the fluid seen at each grain is carried from one step to the next (flight.spheres.Workspace)
 FLUID_FIELDS = ("uf", "grad", "dudt", "vort", "uf_top", "uf_bot")
 _NOT_THE_RUN = {("output", "checkpoint_every"), ("output", "checkpoint_steps"), ("output", "directory"),
                 ("output", "variance"), ("run", "threads")}

@@ -1,9 +1,9 @@
 """The hydrodynamic step as an operator split, with its cost accounting (SPEC §5, §6).
 
 Each step of Δt: (1) free flight of every grain (RK4 with the fluid forces, history
-closure; integrator.free_flight_particles), (2) grain–grain contacts (contacts/phase.py: soft
+closure; flight.spheres.free_flight_particles), (2) grain–grain contacts (contacts/phase.py: soft
 spheres sub-stepped along the free-flight paths, or binary hard-sphere impulses), (3) the
-bed (virtual bed: integrator._bed_check_body, per chunk of grains; packed bed: bed/packed.py). The order is
+bed (virtual bed: flight.spheres._bed_check_body, per chunk of grains; packed bed: bed/packed.py). The order is
 fixed; contacts/phase.py explains the split. Every phase is one parallel pass over the grains,
 and the wall time of each is measured around it (``time.perf_counter`` through Numba's
 object mode, ~0.6 µs per reading, four readings per step) and summed into
@@ -64,7 +64,7 @@ def _free_flight(f, coef, st, w, hc, t, dt):
 
 @njit(cache=True, error_model="numpy", _nrt=False)
 def _bed_range(st, w, lo, hi, t, dt, step, bed, seed, bed_model, pb, last_contact, top, skip, use_skip):
-    """The bed for grains lo..hi-1 (one call per chunk: integrator.CHUNK)."""
+    """The bed for grains lo..hi-1 (one call per chunk: flight.spheres.CHUNK)."""
     for p in range(lo, hi):
         if st.status[p] != OK:
             continue
@@ -92,7 +92,7 @@ def _bed_pass(st, w, t, dt, step, bed, seed, bed_model, pb, last_contact, top, s
 def advance_split(f, coef, bed, seed, st, w, hc, t0, dt, n_steps, top, step0, contacts_mode, model, cl,
                   ph, bc, n_sub, restitution, friction, scratch, bed_model, pb, last_contact, timers):
     """Advance all grains n_steps from t0 (global step index step0): free flight →
-    contacts → bed each step (module docstring). Stops early, like integrator.advance,
+    contacts → bed each step (module docstring). Stops early, like tests/peers/sphere_advance.advance,
     when a grain is not finite or a jump buffer is full. Returns (steps done, the
     ContactList to keep)."""
     n = st.pos.shape[0]
@@ -284,7 +284,7 @@ class Stepper:
             out.update({"ph_" + k: getattr(ph, k) for k in ("contact_substeps", "overlap_sum", "counters",
                                                             "bed_overlap_max")})
             # the bed as a soft contact of sub-stepped grains: its springs and contact slots
-            # carry over from step to step (collide.BedContext)
+            # carry over from step to step (contacts.phase.BedContext)
             out.update({"bc_" + k: getattr(self.bc, k) for k in BED_CONTACT_STATE})
             out["cl_skin"] = np.array([cl.skin])  # widened for fast grains (contacts/phase.py)
         return out

@@ -71,7 +71,7 @@ memory together at release and at every bed impact (physics/history.py explains 
 Bed (virtual rough bed, bed/virtual.py). The grain touches the bed when its lowest component
 sphere's bottom reaches y = 0. As for spheres, the crossing is located by linear
 interpolation within the step (centre of mass moved back along v, orientation turned
-back by Ω), the contact normal n is drawn by ``bed.virtual_bed_normal`` from the
+back by Ω), the contact normal n is drawn by ``bed.virtual.virtual_bed_normal`` from the
 velocity of that component's centre, and the impulse acts at the contact point
 r_c = R r_k − (d_k/2) n with the rigid-body collision matrix
 K = 1/m − [r_c]× I_w⁻¹ [r_c]× (rigid mass and inertia, no added mass — as the sphere
@@ -81,7 +81,7 @@ zero) if |J_t| ≤ f J_n, else sliding opposite to the initial tangential slip. 
 sphere this is exactly SPEC §4. With sliding on a non-spherical body the fixed slip
 direction can in rare configurations add energy; the impulse is then replaced by the
 frictionless one (checked each time). If the contact point still descends afterwards,
-a second impact on the horizontal bed follows (as ``bed.bed_rebound``). Jump height
+a second impact on the horizontal bed follows (as ``bed.virtual.bed_rebound``). Jump height
 is the highest elevation of the grain's lowest point above the bed top.
 
 With bed.model = "packed" (``bed[BED_MODEL] = BED_PACKED``) step_grain leaves the bed
@@ -377,7 +377,7 @@ def _solve6(aug, out):
 
 @njit(cache=True, _nrt=False, error_model="numpy")
 def _sample_component(f, re_star, x, y, z, t, radius, with_lift, uf, grad, dudt, vort, uf_top, uf_bot):
-    # flow.fluid_at_grain with the component's own radius for the lift heights
+    # physics.fluid.fluid_at_grain with the component's own radius for the lift heights
     xp = x * re_star
     yp = y * re_star
     zp = z * re_star
@@ -855,7 +855,7 @@ def _bed_impact(st, w, p, t, dt, y_old, y_new, bed, seed):
     rad = 0.5 * st.d_comp[kb]
     n0, n1, n2 = n[0], n[1], n[2]
     _impulse(st, p, rx - rad * n0, ry - rad * n1, rz - rad * n2, n0, n1, n2, bed[0], bed[1], iw)
-    # second impact on the horizontal bed if the contact point still descends (bed.bed_rebound)
+    # second impact on the horizontal bed if the contact point still descends (bed.virtual.bed_rebound)
     cy = st.vel[p, 1] + st.omega[p, 2] * rx - st.omega[p, 0] * rz
     if cy < 0.0:
         _impulse(st, p, rx, ry - rad, rz, 0.0, 1.0, 0.0, bed[0], bed[1], iw)
@@ -966,7 +966,7 @@ def step_grain(f, coef, bed, seed, st, w, hc, p, t, dt):
 
 @njit(cache=True, parallel=True, error_model="numpy")
 def advance_clusters(f, coef, bed, seed, st, w, hc, t0, dt, n_steps, top):
-    """Advance all composite grains n_steps from t0 (as integrator.advance): stops early
+    """Advance all composite grains n_steps from t0 (as tests/peers/sphere_advance.advance): stops early
     when a grain is not finite or a jump buffer is full; returns the steps done."""
     n = st.pos.shape[0]
     cap = st.jump_buf.shape[1]

@@ -24,7 +24,7 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
 from ..bed.jumps import BED_MIN_JUMP_DURATION, BED_MIN_JUMP_HEIGHT, close_jump
 from ..bed.virtual import bed_rebound, virtual_bed_normal
@@ -136,12 +136,13 @@ def make_state(pos, vel, spin, t0, n_window, jump_capacity=16) -> GrainState:
 
 # Speed. Every call of a compiled function that takes arrays, and every view of an array
 # row, costs Numba an atomic reference-count increment and decrement per array: with ~40
-# arrays in play per grain and stage that was more than the arithmetic. step_particles
-# and the flow kernels are therefore compiled without reference counting (_nrt=False;
-# they allocate nothing, every array they touch is owned by the caller of advance), and
-# the per-stage helper is inlined into it. step_particles is a call per chunk of grains
-# (CHUNK, below), not inlined into advance's prange body: Numba 0.68 drops writes made by
-# parfor-inlined code through a named tuple's arrays (st.status[p] = ...).
+# arrays in play per grain and stage that was more than the arithmetic. The chunk
+# functions (free_flight_particles, below) and the flow kernels are therefore compiled
+# without reference counting (_nrt=False; they allocate nothing, every array they touch is
+# owned by the caller of the step, engine/stepping.py), and the per-stage helper is inlined
+# into them. A chunk function is a call per chunk of grains (CHUNK, below), not inlined into
+# the prange body of engine/stepping.py: Numba 0.68 drops writes made by parfor-inlined code
+# through a named tuple's arrays (st.status[p] = ...).
 # Two Numba facts follow. (1) The kernels the step calls (forces, spin, history, bed,
 # rng) are marked _nrt=False in their own modules, so they are refcount-free whichever
 # caller compiles them first (a test calling one from Python used to leave a counting
@@ -171,7 +172,7 @@ def _rhs(coef, x, basset, uf, grad, dudt, vort, uf_top, uf_bot, acc, dspin, k):
 @njit(cache=True, error_model="numpy", _nrt=False, inline="always")
 def _stage_point(f, re_star, p0, v0, dp, dv, h, t):
     """RK4 stage state x0 + h·k (position p0 + h·dp, velocity v0 + h·dv) and where its
-    position lies in the flow at time t: (velocity, flow.locate_grain result)."""
+    position lies in the flow at time t: (velocity, physics.fluid.locate_grain result)."""
     v = (v0[0] + h * dv[0], v0[1] + h * dv[1], v0[2] + h * dv[2])
     loc = locate_grain(f, re_star, p0[0] + h * dp[0], p0[1] + h * dp[1], p0[2] + h * dp[2], t)
     return v, loc
@@ -377,20 +378,6 @@ def free_flight_particles(f, coef, st, w, hc, lo, hi, t, dt):
 
 
 @njit(cache=True, error_model="numpy", _nrt=False)
-def step_particles(f, coef, bed, seed, st, w, hc, lo, hi, t, dt, top):
-    """One RK4 step from t to t + dt (module docstring) of grains lo..hi-1 that are OK:
-    free flight (``free_flight_particles``), then the bed check; counts steps spent
-    above the stored flow."""
-    free_flight_particles(f, coef, st, w, hc, lo, hi, t, dt)
-    for p in range(lo, hi):
-        if st.status[p] != OK:
-            continue
-        _bed_check_body(st, w, p, t, dt, bed, seed)
-        if st.pos[p, 1] > top:
-            st.above_top[p] += 1
-
-
-@njit(cache=True, error_model="numpy", _nrt=False)
 def _bed_impact(st, w, p, t, dt, y_old, y_new, bed, seed):
     """Rebound on the virtual rough bed; close the jump; reset the history."""
     frac = 1.0
@@ -421,25 +408,3 @@ def _bed_impact(st, w, p, t, dt, y_old, y_new, bed, seed):
     st.jump_ymax[p] = st.pos[p, 1]
     st.fresh[p] = 0  # moved: the fluid must be sampled again
     history_mark_impact(st.hist_meta[p])  # the next step takes the slip step (physics/history.py)
-
-
-@njit(cache=True, parallel=True, error_model="numpy")
-def advance(f, coef, bed, seed, st, w, hc, t0, dt, n_steps, top):
-    """Advance all grains n_steps from t0. Stops early (returning the steps done) when a
-    grain's state is not finite or a jump buffer is full, so the caller can collect."""
-    n = st.pos.shape[0]
-    cap = st.jump_buf.shape[1]
-    n_chunks = (n + CHUNK - 1) // CHUNK
-    k0 = round(t0 / dt)  # the global index of the first step (t0 is always k0 * dt)
-    for s in range(n_steps):
-        t = (k0 + s) * dt  # from the global step index: never from where a chunk began
-        for c in prange(n_chunks):
-            step_particles(f, coef, bed, seed, st, w, hc, c * CHUNK, min(n, (c + 1) * CHUNK), t, dt, top)
-        stop = False
-        for p in range(n):
-            if st.status[p] != OK or st.jump_buf_n[p] >= cap:
-                stop = True
-                break
-        if stop:
-            return s + 1
-    return n_steps

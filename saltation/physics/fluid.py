@@ -56,7 +56,7 @@ def fluid_at_grain(f, re_star, x, y, z, t, with_lift, uf, grad, dudt, vort, uf_t
 def locate_grain(f, re_star, x, y, z, t):
     """Where a grain centre (particle units) lies in the flow data (a compiled call, not
     inlined: inlined with ``gather_at`` and ``grain_velocity`` at every RK4 stage of
-    integrator._weight_drag_flight it made that function take 4 minutes to compile):
+    flight.spheres._weight_drag_flight it made that function take 4 minutes to compile):
     (i0, i1, wx, j0, j1, wy, k0, k1, wz, n0, n1, wt, below_wall, sublayer, y⁺).
     With ``grain_velocity`` it gives the velocity ``fluid_at_grain`` gives (same
     arithmetic), split so that a caller can keep the gathered cell (sampler.gather_cell)."""

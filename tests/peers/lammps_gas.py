@@ -4,7 +4,7 @@ benchmark (benchmarks/bench_contacts_lammps.py).
 
 Equal spheres of diameter 1 and mass 1 (LAMMPS ``units lj``; density 6/π) in a periodic
 cube of side ``length``, ``pair_style gran/hooke/history`` with the stiffness, damping and
-friction of a ``contacts.ContactModel``, ``fix nve/sphere``, ``neighbor SKIN bin`` checked
+friction of a ``contacts.pairs.ContactModel``, ``fix nve/sphere``, ``neighbor SKIN bin`` checked
 every step. Values are written with ``repr`` so that LAMMPS reads the same doubles.
 """
 from __future__ import annotations
