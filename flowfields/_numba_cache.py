@@ -81,20 +81,16 @@ def kernel_sources(root: Path | None = None) -> list[Path]:
     """The kernel modules of both packages and everything of theirs they import."""
     root = root or Path(__file__).resolve().parents[1]
     every = [p for pkg in PACKAGES for p in sorted((root / pkg).rglob("*.py"))]
-    todo = [p for p in every if _KERNEL.search(p.read_text(encoding="utf-8"))]
-    seen = set(todo)
-    while todo:
-        for f in _imports(root, todo.pop()):
-            if f not in seen:
-                seen.add(f)
-                todo.append(f)
-    return sorted(seen)
+    return _closure([p for p in every if _KERNEL.search(p.read_text(encoding="utf-8"))], root)
 
 
 def module_closure(path: Path, root: Path | None = None) -> list[Path]:
     """``path`` and every module of the two packages it imports, transitively."""
-    root = root or ROOT
-    seen, todo = {path}, [path]
+    return _closure([path], root or ROOT)
+
+
+def _closure(start: list[Path], root: Path) -> list[Path]:
+    seen, todo = set(start), list(start)
     while todo:
         for f in _imports(root, todo.pop()):
             if f not in seen:

@@ -384,22 +384,7 @@ class ClusterSimulation(Simulation):
         n_comp = np.array([g.n_spheres for g in self.composites])
         vol = np.array([g.volume for g in self.composites])
         summary = {
-            "status": status,
-            "n_particles": self.n,
-            "concentration": c.concentration,
-            "domain_m": list(c.domain),
-            "tau_star": c.shields_number,
-            "tau_ratio": c.tau_ratio,
-            "shear_velocity_m_s": c.shear_velocity,
-            "re_star": self.re_star,
-            "rp": c.particle_reynolds,
-            "flow": {"source": c.flow.source,
-                     "dataset": str(self.flow.path) if self.flow.path else self.flow.meta.get("kind"),
-                     "re_tau": self.flow.re_tau, "top_d": self.top_d},
-            "dt_particle": self.dt,
-            "steps": steps,
-            "simulated_time_particle": duration_p,
-            "simulated_time_s": duration_p * c.time_scale,
+            **self._summary_head(status, steps),
             "shape": {
                 "shape": c.particle.shape,
                 "fractions": c.particle.shape_fractions,

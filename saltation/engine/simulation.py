@@ -535,10 +535,10 @@ class Simulation:
         write_table(self.out / "particles.parquet", table, run_metadata(self.case, "particles"))
 
     # ------------------------------------------------------------------ summary
-    def _summary(self, st, rows, steps, wall, compile_s, kernel_s, threads, status):
+    def _summary_head(self, status, steps) -> dict:
+        """The first keys of summary.json, the same for every grain family: the case, the
+        flow, the steps run."""
         c = self.case
-        jumps = np.concatenate(rows) if rows else empty_rows()
-        particle_steps = self.n * steps
         duration_p = steps * self.dt
         return {
             "status": status,
@@ -556,6 +556,14 @@ class Simulation:
             "steps": steps,
             "simulated_time_particle": duration_p,
             "simulated_time_s": duration_p * c.time_scale,
+        }
+
+    def _summary(self, st, rows, steps, wall, compile_s, kernel_s, threads, status):
+        jumps = np.concatenate(rows) if rows else empty_rows()
+        particle_steps = self.n * steps
+        duration_p = steps * self.dt
+        return {
+            **self._summary_head(status, steps),
             "jumps": jump_statistics(jumps),
             "collisions": self.stepper.collisions_summary(st, duration_p),
             "steps_above_flow_top": int(st.above_top.sum()),
