@@ -99,14 +99,19 @@ def _closure(start: list[Path], root: Path) -> list[Path]:
     return sorted(seen)
 
 
-def closure_stamp(path: Path, root: Path | None = None) -> str:
-    """The cache stamp of the kernels defined in ``path``: a hash of its import closure."""
-    root = root or ROOT
+def _hash_sources(paths: list[Path], root: Path) -> str:
+    """A hash of the files' paths (relative to root) and contents."""
     h = hashlib.sha1()
-    for p in module_closure(path, root):
+    for p in paths:
         h.update(p.relative_to(root).as_posix().encode())
         h.update(p.read_bytes())
     return h.hexdigest()
+
+
+def closure_stamp(path: Path, root: Path | None = None) -> str:
+    """The cache stamp of the kernels defined in ``path``: a hash of its import closure."""
+    root = root or ROOT
+    return _hash_sources(module_closure(path, root), root)
 
 
 @functools.cache
@@ -116,11 +121,7 @@ def _closure_stamp(py_file: str) -> str:
 
 def kernel_version() -> str:
     """A hash of every kernel module and what they import (names the compile notice's marker)."""
-    h = hashlib.sha1()
-    for p in kernel_sources(ROOT):
-        h.update(p.relative_to(ROOT).as_posix().encode())
-        h.update(p.read_bytes())
-    return h.hexdigest()[:16]
+    return _hash_sources(kernel_sources(ROOT), ROOT)[:16]
 
 
 def _locator_class():
@@ -136,12 +137,9 @@ def _locator_class():
 
         @classmethod
         def from_function(cls, py_func, py_file):
-            try:
-                Path(py_file).resolve().relative_to(ROOT)
-            except ValueError:
+            path = Path(py_file).resolve()
+            if not path.is_relative_to(ROOT) or path.relative_to(ROOT).parts[0] not in STAMPED:
                 return None  # not ours: Numba's own locators decide
-            if Path(py_file).resolve().relative_to(ROOT).parts[0] not in STAMPED:
-                return None
             return super().from_function(py_func, py_file)
 
     return caching, ClosureStampedLocator

@@ -68,21 +68,14 @@ from ..flight import composites as clusters
 from ..grains import shapes
 from ..grains.initial import Y_RANGE, initial_conditions
 from ..io.writers import ClusterTrackWriter, run_metadata, write_table
-from ..physics import history
-from ..physics.forces import CM, make_coefficients
+from ..physics.forces import CM
 from .simulation import Simulation, SimulationError
 from .statistics import DISCARDED_JUMPS, empty_rows, jump_statistics
+from .stepping import LIST_HEIGHT, default_skin  # the contact skin and cell height of sphere runs
 
 CLASS_IDS = {c: i for i, c in enumerate(shapes.CLASSES)}  # track column class_id
 MIN_START_BOTTOM = Y_RANGE[0] - 0.5  # d: lowest start of a sphere's bottom (grains/initial.py)
 JUMP_CAPACITY = 16
-SKIN_SPEED = 20.0  # u*: default contact skin covers a grain at this speed over one step, ×1.2 (as engine/stepping.py)
-LIST_HEIGHT = (4.0, 60.0)  # d: bounds of the contact cells' height (grains above share its top layer)
-
-
-def default_skin(dt_particle: float) -> float:
-    """Contact skin (d) when collisions.skin is absent: stepping.default_skin's rule."""
-    return max(0.1, 2.0 * 1.2 * SKIN_SPEED * dt_particle)
 
 
 def check_case(case: Case) -> None:
@@ -123,37 +116,14 @@ class ClusterSimulation(Simulation):
 
     def __init__(self, case: Case, flow, out: Path, progress=True, resume=False, stop_after_steps=None,
                  notice=None):
-        self.notice = notice  # progress.compile_notice of the run, told when the kernels are compiled
         check_case(case)
-        self.case, self.flow, self.out, self.progress = case, flow, Path(out), progress
-        self.resume = resume
-        self.stop_after_steps = stop_after_steps  # a test hook: a SIGINT once that many steps are done
-        self._signal = None
-        self._writing = False
-        self._second_signal = False
+        self._setup_run(case, flow, out, progress, resume, stop_after_steps, notice)
         self._saved = None  # a checkpoint's contact and bed arrays, restored by _start
-        self.n = int(case.n_particles)
-        d = case.particle.diameter
-        lx, lz, _ = case.domain
-        self.domain_d = (lx / d, lz / d)
-        self.dt = case.dt_particle
-        self.n_steps = case.n_steps
-        self.re_star = case.shear_reynolds
-        f = case.forces
-        self.coef = make_coefficients(
-            tau_star=case.shields_number, R=case.submerged_specific_gravity, re_star=self.re_star,
-            slope=case.flow.slope_radians, Cm=f.added_mass_coefficient, C_L=f.lift_coefficient,
-            C_Omega=f.magnus_coefficient, weight=f.weight, drag=f.drag, lift=f.lift, magnus=f.magnus,
-            added_mass=f.added_mass, fluid_acceleration=f.fluid_acceleration, basset=f.basset,
-            spin=f.spin)
         self.packed = case.bed.model == "packed"
         self.bed = run_bed_parameters(case, self.coef, self.dt, clusters.BED_PACKED if self.packed else 0.0)
         self.pb = None  # packed bed (bed/packed_composites.py), built with the state
         self.last_contact = np.full(self.n, -2, np.int64)
         self.bed_s = 0.0
-        self.n_window = f.basset_window
-        self.hist_coef = history.make_history_coefficients(self.dt, self.n_window, impacts=f.basset_impacts)
-        self.top_d = float(flow.y[-1]) / self.re_star
         self.classes, self.axes, self.composites = draw_grains(case, self.n)
         self.class_id = np.array([CLASS_IDS[c] for c in self.classes], dtype=np.int8)
         self.contacts = case.collisions.model == "soft" and self.n > 1

@@ -148,6 +148,17 @@ class Simulation:
         """resume: continue from out/checkpoint.npz. stop_after_steps: a test hook that
         acts as a SIGINT arriving once that many steps are done. notice: the run's
         progress.compile_notice, told when the kernels are compiled."""
+        self._setup_run(case, flow, out, progress, resume, stop_after_steps, notice)
+        self.bed = run_bed_parameters(case, self.coef, self.dt)
+        # contacts and bed (engine/stepping.py: free flight → grain contacts → bed each step)
+        self.stepper = Stepper(case, self.n, self.domain_d, self.top_d, self.coef, self.bed, case.run.seed,
+                               self.hist_coef, self.dt)
+        self._stepper_arrays = None
+
+    def _setup_run(self, case: Case, flow, out, progress, resume, stop_after_steps, notice):
+        """What every grain family's run holds: the case, flow and run directory, the
+        interrupt state, the sizes and time step in particle units, the force and Basset
+        history coefficients."""
         self.notice = notice
         self.case = case
         self.flow = flow
@@ -183,14 +194,9 @@ class Simulation:
             basset=f.basset,
             spin=f.spin,
         )
-        self.bed = run_bed_parameters(case, self.coef, self.dt)
         self.n_window = f.basset_window
         self.hist_coef = history.make_history_coefficients(self.dt, self.n_window, impacts=f.basset_impacts)
         self.top_d = float(flow.y[-1]) / self.re_star
-        # contacts and bed (engine/stepping.py: free flight → grain contacts → bed each step)
-        self.stepper = Stepper(case, self.n, self.domain_d, self.top_d, self.coef, self.bed, case.run.seed,
-                               self.hist_coef, self.dt)
-        self._stepper_arrays = None
 
     # ------------------------------------------------------------------ helpers
     SERIAL_BELOW = 2000  # grains: below this a step is too short to share between threads
