@@ -69,6 +69,8 @@ from typing import Any, ClassVar
 
 from flowfields.dataset import SHIPPED_DATASETS
 
+from ..physics.forces import yen_drag_coefficient
+
 __all__ = [
     "GRAVITY",
     "PAPER_DOMAIN_M",
@@ -580,9 +582,8 @@ TABLES: dict[str, type[_Table]] = {
 
 
 def _yen_drag_factor(re_p: float) -> float:
-    """C_D Re_p / 24 for the Yen (1992) drag law of SPEC §2 (1 in the Stokes limit)."""
-    return (1.0 + 0.15 * math.sqrt(re_p) + 0.017 * re_p
-            - 0.208 * re_p / (24.0 * (1.0 + 1.0e4 / math.sqrt(re_p))))
+    """C_D Re_p / 24 of the Yen (1992) drag law of SPEC §2 (physics/forces.py; 1 in the Stokes limit)."""
+    return yen_drag_coefficient.py_func(re_p) * re_p / 24.0
 
 
 # --------------------------------------------------------------------------- the case

@@ -60,6 +60,10 @@ __all__ = [
     "build_neighbour_list",
     "neighbour_pairs",
     "allocate_cells",
+    "axis_index",
+    "grid_shape",
+    "stencil_cell",
+    "sort_points",
 ]
 
 
@@ -87,7 +91,7 @@ def make_grid(box, min_size, periodic=(True, False, True), max_cells=None) -> Ce
         if per[a] and box[a] < 2.0 * min_size:
             raise ValueError(f"periodic axis {'xyz'[a]} of length {box[a]!r} is shorter than "
                              f"twice the cutoff {min_size!r}: minimum image is ambiguous")
-    n = np.maximum(1, np.floor(box / min_size)).astype(np.int64)
+    n, _ = grid_shape(box, float(min_size))
     if max_cells is not None:
         while int(np.prod(n)) > max_cells:
             a = int(np.argmax(n))
@@ -102,8 +106,21 @@ def allocate_cells(n_particles: int, grid: CellGrid):
             np.zeros(n_particles, np.int64))
 
 
+@njit(cache=True)
+def grid_shape(box, cut):
+    """Cells per axis (3,) int64 (≥ 1) and their edges (3,) for cells at least ``cut`` wide
+    (make_grid's rule, callable inside kernels that size their grid per step)."""
+    n = np.empty(3, np.int64)
+    size = np.empty(3)
+    for a in range(3):
+        n[a] = max(1, int(math.floor(box[a] / cut)))
+        size[a] = box[a] / n[a]
+    return n, size
+
+
 @njit(cache=True, inline="always")
-def _axis_index(x, n, size, length, periodic):
+def axis_index(x, n, size, length, periodic):
+    """Cell layer of coordinate x on an axis of n cells of ``size`` (wrapped or clamped)."""
     if periodic:
         s = x - length * math.floor(x / length)
         k = int(s / size)
@@ -124,9 +141,9 @@ def _axis_index(x, n, size, length, periodic):
 def cell_index(grid, x, y, z):
     """Linear cell id of the point (x, y, z) (wrapped on periodic axes, clamped otherwise)."""
     n, h, b, p = grid.n, grid.size, grid.box, grid.periodic
-    ix = _axis_index(x, n[0], h[0], b[0], p[0])
-    iy = _axis_index(y, n[1], h[1], b[1], p[1])
-    iz = _axis_index(z, n[2], h[2], b[2], p[2])
+    ix = axis_index(x, n[0], h[0], b[0], p[0])
+    iy = axis_index(y, n[1], h[1], b[1], p[1])
+    iz = axis_index(z, n[2], h[2], b[2], p[2])
     return (ix * n[1] + iy) * n[2] + iz
 
 
@@ -138,9 +155,9 @@ def _cell_ids(pos, grid, cell_of):
     lx, ly, lz = b[0], b[1], b[2]
     px, py, pz = p[0], p[1], p[2]
     for i in prange(pos.shape[0]):
-        ix = _axis_index(pos[i, 0], nx, hx, lx, px)
-        iy = _axis_index(pos[i, 1], ny, hy, ly, py)
-        iz = _axis_index(pos[i, 2], nz, hz, lz, pz)
+        ix = axis_index(pos[i, 0], nx, hx, lx, px)
+        iy = axis_index(pos[i, 1], ny, hy, ly, py)
+        iz = axis_index(pos[i, 2], nz, hz, lz, pz)
         cell_of[i] = (ix * ny + iy) * nz + iz
 
 
@@ -194,6 +211,55 @@ def _pick(s, a, b, c):
     if s == 1:
         return b
     return c
+
+
+@njit(cache=True, inline="always")
+def _layer(k, n, periodic, s):
+    """s-th (0..2) neighbouring layer of layer k, or −1 where it does not exist or repeats
+    one already given (an axis of one or two layers); the order of ``_layers``."""
+    if periodic:
+        if n >= 3:
+            return (k + s - 1) % n
+        if s < n:
+            return s
+        return -1
+    j = k + s - 1
+    if j < 0 or j >= n:
+        return -1
+    return j
+
+
+@njit(cache=True, inline="always")
+def stencil_cell(ix, iy, iz, n, periodic, s):
+    """Cell of entry s (0..26) of the 3×3×3 stencil around cell (ix, iy, iz), x outermost
+    and z innermost (the order of ``stencil_cells``); −1 where that neighbour does not
+    exist or was given already. For loops that walk the stencil without a buffer."""
+    cx = _layer(ix, n[0], periodic[0], s // 9)
+    cy = _layer(iy, n[1], periodic[1], (s // 3) % 3)
+    cz = _layer(iz, n[2], periodic[2], s % 3)
+    if cx < 0 or cy < 0 or cz < 0:
+        return -1
+    return (cx * n[1] + cy) * n[2] + cz
+
+
+@njit(cache=True)
+def sort_points(pos, ids, box, n, size, periodic):
+    """Counting sort of the points pos[ids] into the cells (n, size) of ``box``:
+    (cell_start, cell_count, order), ``order`` holding positions into ``ids``; stable, as
+    ``build_cells``. For kernels that sort a subset of points each step."""
+    cell = np.empty(ids.shape[0], np.int64)
+    for q in range(ids.shape[0]):
+        i = ids[q]
+        ix = axis_index(pos[i, 0], n[0], size[0], box[0], periodic[0])
+        iy = axis_index(pos[i, 1], n[1], size[1], box[1], periodic[1])
+        iz = axis_index(pos[i, 2], n[2], size[2], box[2], periodic[2])
+        cell[q] = (ix * n[1] + iy) * n[2] + iz
+    nc = n[0] * n[1] * n[2]
+    start = np.empty(nc, np.int64)
+    count = np.empty(nc, np.int64)
+    order = np.empty(ids.shape[0], np.int64)
+    _counting_sort(cell, start, count, order)
+    return start, count, order
 
 
 @njit(cache=True)

@@ -25,7 +25,8 @@ conserved to round-off.
   rebounds a little more elastically — the usual choice for clumped-sphere DEM;
 - tangential spring (history per component pair, as contacts/pairs.py / LAMMPS
   gran/hooke/history): ξ ← ξ + v_t h, ξ ← ξ − (ξ·n) n, F_t = −k_t ξ; Coulomb limit
-  |F_t| ≤ f |F_n| (F_t scaled to it and ξ = −F_t/k_t);
+  |F_t| ≤ f |F_n| (F_t scaled to it and ξ = −F_t/k_t). Normal and tangential force are
+  the one law every soft contact uses (physics/contact_law.spring_dashpot), with c_t = 0;
 - on grain i: F += F_n + F_t, T += (x_c − x_i) × (F_n + F_t); on j the negatives.
 
 k_n, k_t, e and f are the case's [collisions] values, the same as the sphere runs
@@ -103,7 +104,9 @@ import numpy as np
 from numba import njit, objmode, prange
 
 from ..flight.composites import OK, _quat_to_matrix, step_grain
+from ..physics.contact_law import spring_dashpot
 from ..physics.history import history_mark_impact
+from .cells import axis_index, grid_shape, min_image, sort_points, stencil_cell
 
 __all__ = ["ClusterContacts", "make_cluster_contacts", "contact_parameters", "substeps", "contact_phase",
            "build_contact_list",
@@ -113,7 +116,13 @@ __all__ = ["ClusterContacts", "make_cluster_contacts", "contact_parameters", "su
 PARALLEL_FROM = 128  # active grains from which the sub-step passes run in parallel (launch cost)
 PARTNERS = 16  # grains one grain can touch at once (statistics; more are not counted as new)
 DEFAULT_SKIN = 0.3  # Dn: engagement margin and list skin when the case gives none
-N_COUNTERS = 4  # list builds, overruns, grain-substeps, engaged grain-steps
+# slots of ClusterContacts.counters (engine/composites.py reports them by these names)
+LIST_BUILDS = 0  # component neighbour-list builds
+OVERRUNS = 1  # grains that moved further than the list's skin allowed
+SUBSTEPPED = 2  # grain-sub-steps done
+ENGAGED = 3  # engaged grain-steps
+N_COUNTERS = 4
+PERIODIC = (1, 0, 1)  # x and z periodic, y clamped (contacts/cells.py)
 
 
 class ClusterContacts(NamedTuple):
@@ -228,97 +237,9 @@ def make_cluster_contacts(st, par, capacity: int = 32) -> ClusterContacts:
 
 # ----------------------------------------------------------------------------- small kernels
 @njit(cache=True, inline="always")
-def _min_image(dx, length):
-    return dx - length * math.floor(dx / length + 0.5)
-
-
-@njit(cache=True, inline="always")
-def _axis_cell(x, n, size, length, periodic):
-    if periodic:
-        s = x - length * math.floor(x / length)
-        k = int(s / size)
-    else:
-        k = int(math.floor(x / size)) if x > 0.0 else 0
-    if k >= n:
-        k = n - 1
-    if k < 0:
-        k = 0
-    return k
-
-
-@njit(cache=True, inline="always")
-def _layer(k, n, periodic, s):
-    """s-th (0..2) neighbouring layer of layer k, or −1 when it does not exist or
-    repeats one already given (an axis of one or two layers)."""
-    if periodic:
-        if n >= 3:
-            return (k + s - 1) % n
-        if s < n:
-            return s
-        return -1
-    j = k + s - 1
-    if j < 0 or j >= n:
-        return -1
-    return j
-
-
-@njit(cache=True, inline="always")
-def _stencil_cell(ix, iy, iz, n, s):
-    """Cell of entry s (0..26) of the 3×3×3 stencil around cell (ix, iy, iz), x outermost
-    and z innermost; −1 where that neighbour does not exist (``_layer``)."""
-    cx = _layer(ix, n[0], True, s // 9)
-    cy = _layer(iy, n[1], False, (s // 3) % 3)
-    cz = _layer(iz, n[2], True, s % 3)
-    if cx < 0 or cy < 0 or cz < 0:
-        return -1
-    return (cx * n[1] + cy) * n[2] + cz
-
-
-@njit(cache=True, inline="always")
 def _qmul(a0, a1, a2, a3, b0, b1, b2, b3):
     return (a0 * b0 - a1 * b1 - a2 * b2 - a3 * b3, a0 * b1 + a1 * b0 + a2 * b3 - a3 * b2,
             a0 * b2 - a1 * b3 + a2 * b0 + a3 * b1, a0 * b3 + a1 * b2 - a2 * b1 + a3 * b0)
-
-
-@njit(cache=True)
-def _grid(box, cut):
-    """Cells per axis (3,) int64 and their edges (3,) for a cutoff ``cut`` (≥ 1 cell)."""
-    n = np.empty(3, np.int64)
-    size = np.empty(3)
-    for a in range(3):
-        n[a] = max(1, int(math.floor(box[a] / cut)))
-        size[a] = box[a] / n[a]
-    return n, size
-
-
-@njit(cache=True)
-def _sort(pos, ids, box, n, size, periodic_y):
-    """Counting sort of the points pos[ids] into cells: (cell_start, cell_count, order)
-    with order holding positions into ``ids``. Stable (ids order within a cell)."""
-    nc = n[0] * n[1] * n[2]
-    count = np.zeros(nc, np.int64)
-    start = np.zeros(nc, np.int64)
-    cell = np.empty(ids.shape[0], np.int64)
-    for q in range(ids.shape[0]):
-        i = ids[q]
-        ix = _axis_cell(pos[i, 0], n[0], size[0], box[0], True)
-        iy = _axis_cell(pos[i, 1], n[1], size[1], box[1], periodic_y)
-        iz = _axis_cell(pos[i, 2], n[2], size[2], box[2], True)
-        c = (ix * n[1] + iy) * n[2] + iz
-        cell[q] = c
-        count[c] += 1
-    run = 0
-    for c in range(nc):
-        start[c] = run
-        run += count[c]
-    order = np.empty(ids.shape[0], np.int64)
-    for q in range(ids.shape[0]):
-        c = cell[q]
-        order[start[c]] = q
-        start[c] += 1
-    for c in range(nc):
-        start[c] -= count[c]
-    return start, count, order, cell
 
 
 # ----------------------------------------------------------------------------- engagement
@@ -361,21 +282,21 @@ def _reach_one(st, w, cc, p, dt):
 def _engage_pass(pos, ok, rho, reach, skin, box, n, size, start, count, order, ids, active):
     for q in prange(ids.shape[0]):
         i = ids[q]
-        ix = _axis_cell(pos[i, 0], n[0], size[0], box[0], True)
-        iy = _axis_cell(pos[i, 1], n[1], size[1], box[1], False)
-        iz = _axis_cell(pos[i, 2], n[2], size[2], box[2], True)
+        ix = axis_index(pos[i, 0], n[0], size[0], box[0], 1)
+        iy = axis_index(pos[i, 1], n[1], size[1], box[1], 0)
+        iz = axis_index(pos[i, 2], n[2], size[2], box[2], 1)
         hit = 0
         for s in range(27):
-            c = _stencil_cell(ix, iy, iz, n, s)
+            c = stencil_cell(ix, iy, iz, n, PERIODIC, s)
             if c < 0:
                 continue
             for m in range(start[c], start[c] + count[c]):
                 j = ids[order[m]]
                 if j == i:
                     continue
-                dx = _min_image(pos[i, 0] - pos[j, 0], box[0])
+                dx = min_image(pos[i, 0] - pos[j, 0], box[0], 1)
                 dy = pos[i, 1] - pos[j, 1]
-                dz = _min_image(pos[i, 2] - pos[j, 2], box[2])
+                dz = min_image(pos[i, 2] - pos[j, 2], box[2], 1)
                 lim = rho[i] + rho[j] + reach[i] + reach[j] + skin
                 if dx * dx + dy * dy + dz * dz < lim * lim:
                     hit = 1
@@ -407,11 +328,11 @@ def _engage(st, w, cc):
             dmax = max(dmax, cc.reach[p])
     cut = min(2.0 * (rmax + dmax) + skin, 0.5 * min(box[0], box[2]))
     pos = w.x0[:, 0:3]
-    gn, size = _grid(box, cut)
-    start, count, order, _ = _sort(pos, ids, box, gn, size, False)
+    gn, size = grid_shape(box, cut)
+    start, count, order = sort_points(pos, ids, box, gn, size, PERIODIC)
     cc.active[:] = 0
     if 2.0 * (rmax + dmax) + skin > 0.5 * min(box[0], box[2]):
-        cc.counters[1] += 1  # cells capped at half the box: counted as an overrun
+        cc.counters[OVERRUNS] += 1  # cells capped at half the box: counted as an overrun
     _engage_pass(pos, st.status, cc.rho, cc.reach, skin, box, gn, size, start, count, order, ids, cc.active)
     k = 0
     for p in range(n):
@@ -430,21 +351,21 @@ def _list_pass(cp, comps, grain_of, dcomp, creach, skin, box, n, size, start, co
     for q in prange(comps.shape[0]):
         a = comps[q]
         ga = grain_of[a]
-        ix = _axis_cell(cp[a, 0], n[0], size[0], box[0], True)
-        iy = _axis_cell(cp[a, 1], n[1], size[1], box[1], False)
-        iz = _axis_cell(cp[a, 2], n[2], size[2], box[2], True)
+        ix = axis_index(cp[a, 0], n[0], size[0], box[0], 1)
+        iy = axis_index(cp[a, 1], n[1], size[1], box[1], 0)
+        iz = axis_index(cp[a, 2], n[2], size[2], box[2], 1)
         k = 0
         for s in range(27):
-            c = _stencil_cell(ix, iy, iz, n, s)
+            c = stencil_cell(ix, iy, iz, n, PERIODIC, s)
             if c < 0:
                 continue
             for m in range(start[c], start[c] + count[c]):
                 b = comps[order[m]]
                 if grain_of[b] == ga:
                     continue
-                dx = _min_image(cp[a, 0] - cp[b, 0], box[0])
+                dx = min_image(cp[a, 0] - cp[b, 0], box[0], 1)
                 dy = cp[a, 1] - cp[b, 1]
-                dz = _min_image(cp[a, 2] - cp[b, 2], box[2])
+                dz = min_image(cp[a, 2] - cp[b, 2], box[2], 1)
                 lim = 0.5 * (dcomp[a] + dcomp[b]) + creach[a] + creach[b] + skin
                 if dx * dx + dy * dy + dz * dz < lim * lim:
                     if k < cap:
@@ -498,9 +419,9 @@ def _build_list(st, cc):
     cut = dmax + 2.0 * rmax + skin
     if cut > 0.5 * min(box[0], box[2]):
         cut = 0.5 * min(box[0], box[2])
-        cc.counters[1] += 1
-    gn, size = _grid(box, cut)
-    start, count, order, _ = _sort(cc.cp, comps, box, gn, size, False)
+        cc.counters[OVERRUNS] += 1
+    gn, size = grid_shape(box, cut)
+    start, count, order = sort_points(cc.cp, comps, box, gn, size, PERIODIC)
     nbr2, cnt2, shear2 = cc.nbr2, cc.nbr_count2, cc.shear2
     most = _list_pass(cc.cp, comps, cc.grain_of, st.d_comp, creach, skin, box, gn, size, start, count, order,
                       nbr2, cnt2)
@@ -525,7 +446,7 @@ def _build_list(st, cc):
     for a in range(keep.shape[0]):
         if keep[a] == 0:
             cnt2[a] = 0
-    cc.counters[0] += 1
+    cc.counters[LIST_BUILDS] += 1
     for q in range(na):
         cc.dev[cc.act[q]] = 0.0
     return ClusterContacts(cc.par, cc.grain_of, cc.rho, cc.rnorm, nbr2, cnt2, shear2, spare_nbr, spare_cnt,
@@ -643,8 +564,8 @@ def _pose_one(st, w, cc, p, s, dt):
 def component_forces(st, cc, h, update):
     """Contact force and torque on every active grain from its component contacts
     (module docstring) at the current poses (cc.P, cc.V, cc.Om, cc.cp); ``h`` the
-    sub-step ξ advances by, ``update`` False for a set-up evaluation (ξ and the
-    statistics untouched). Race-free: iteration p writes only grain p's rows."""
+    sub-step ξ advances by, ``update`` False for a set-up evaluation (ξ not advanced, only
+    held at the Coulomb limit as every soft contact does; the statistics untouched). Race-free: iteration p writes only grain p's rows."""
     for q in prange(cc.n_act[0]):
         _grain_force(st, cc, cc.act[q], h, update)
 
@@ -663,9 +584,9 @@ def _grain_force(st, cc, p, h, update):
             b = cc.nbr[a, k]
             g = cc.grain_of[b]
             dsum = 0.5 * (da + st.d_comp[b])
-            delx = _min_image(cc.cp[a, 0] - cc.cp[b, 0], lx)
+            delx = min_image(cc.cp[a, 0] - cc.cp[b, 0], lx, 1)
             dely = cc.cp[a, 1] - cc.cp[b, 1]
-            delz = _min_image(cc.cp[a, 2] - cc.cp[b, 2], lz)
+            delz = min_image(cc.cp[a, 2] - cc.cp[b, 2], lz, 1)
             rsq = delx * delx + dely * dely + delz * delz
             sh = cc.shear[a, k]
             if rsq >= dsum * dsum or rsq == 0.0:
@@ -690,35 +611,11 @@ def _grain_force(st, cc, p, h, update):
             vr0 = (cc.V[p, 0] + oi[1] * ci2 - oi[2] * ci1) - (cc.V[g, 0] + oj[1] * cj2 - oj[2] * cj1)
             vr1 = (cc.V[p, 1] + oi[2] * ci0 - oi[0] * ci2) - (cc.V[g, 1] + oj[2] * cj0 - oj[0] * cj2)
             vr2 = (cc.V[p, 2] + oi[0] * ci1 - oi[1] * ci0) - (cc.V[g, 2] + oj[0] * cj1 - oj[1] * cj0)
-            vn = vr0 * n0 + vr1 * n1 + vr2 * n2
-            vt0 = vr0 - vn * n0
-            vt1 = vr1 - vn * n1
-            vt2 = vr2 - vn * n2
             mg = st.mass[g]
             meff = mp * mg / (mp + mg)
-            fn = kn * dlt - zeta * math.sqrt(meff * kn) * vn
-            if update:
-                sh[0] += vt0 * h
-                sh[1] += vt1 * h
-                sh[2] += vt2 * h
-                sn = sh[0] * n0 + sh[1] * n1 + sh[2] * n2
-                sh[0] -= sn * n0
-                sh[1] -= sn * n1
-                sh[2] -= sn * n2
-            ft0 = -kt * sh[0]
-            ft1 = -kt * sh[1]
-            ft2 = -kt * sh[2]
-            ftm = math.sqrt(ft0 * ft0 + ft1 * ft1 + ft2 * ft2)
-            lim = mu * abs(fn)
-            if ftm > lim:
-                sc = lim / ftm
-                ft0 *= sc
-                ft1 *= sc
-                ft2 *= sc
-                if update:
-                    sh[0] *= sc
-                    sh[1] *= sc
-                    sh[2] *= sc
+            fn, ft0, ft1, ft2, sh[0], sh[1], sh[2] = spring_dashpot(
+                n0, n1, n2, dlt, vr0, vr1, vr2, sh[0], sh[1], sh[2], h, update,
+                kn, kt, zeta * math.sqrt(meff * kn), 0.0, mu)
             f0 = fn * n0 + ft0
             f1 = fn * n1 + ft1
             f2 = fn * n2 + ft2
@@ -957,7 +854,7 @@ def contact_phase(st, w, cc, dt, n_sub):
     na = cc.n_act[0]
     if na == 0:
         return cc
-    cc.counters[3] += na
+    cc.counters[ENGAGED] += na
     h = dt / n_sub
     half_skin = 0.5 * cc.par[4]
     component_forces(st, cc, h, False)
@@ -967,13 +864,13 @@ def contact_phase(st, w, cc, dt, n_sub):
         # half kick, drift, pose at σ (one pass); contact forces and the second half kick
         over = _move_par(st, w, cc, h, half_skin, sig, dt) if par else _move_ser(st, w, cc, h, half_skin, sig, dt)
         if over > 0:
-            cc.counters[1] += over
+            cc.counters[OVERRUNS] += over
             cc = _build_list(st, cc)
         if par:
             _force_kick_par(st, cc, h)
         else:
             _force_kick_ser(st, cc, h)
-    cc.counters[2] += na * n_sub
+    cc.counters[SUBSTEPPED] += na * n_sub
     _finish(st, w, cc)
     return cc
 

@@ -13,7 +13,8 @@ it to 1 + Cm ρ/ρp counts it; either way the damping is set from the restitutio
 that mass, so the restitution is what the case asks for.
 
 Soft-sphere model (linear spring–dashpot, Cundall & Strack 1979; LAMMPS
-``pair_style gran/hooke/history``, whose conventions are followed exactly)
+``pair_style gran/hooke/history``, whose conventions are followed exactly; the force
+itself is physics/contact_law.spring_dashpot, shared by every soft contact)
 --------------------------------------------------------------------------------
 For grains i, j with centre separation r = |x_i − x_j| < d (minimum image on periodic
 axes), n = (x_i − x_j)/r, overlap δ = d − r, m_eff = m/2, lever arm a (below):
@@ -132,6 +133,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit, prange
 
+from ..physics.contact_law import spring_dashpot
 from .cells import CellGrid, allocate_cells, build_cells, build_neighbour_list, make_grid, min_image, stencil_cells
 
 __all__ = [
@@ -426,66 +428,25 @@ def contact_forces(pos, vel, spin, model, cl, dt, update_history, force, torque)
                 continue
             r = math.sqrt(rsq)
             rinv = 1.0 / r
-            rsqinv = 1.0 / rsq
-            # relative translational velocity, normal and tangential parts
-            vr1 = vel[i, 0] - vel[j, 0]
-            vr2 = vel[i, 1] - vel[j, 1]
-            vr3 = vel[i, 2] - vel[j, 2]
-            vnnr = vr1 * delx + vr2 * dely + vr3 * delz
-            vt1 = vr1 - delx * vnnr * rsqinv
-            vt2 = vr2 - dely * vnnr * rsqinv
-            vt3 = vr3 - delz * vnnr * rsqinv
-            # lever arm times (ω_i + ω_j), divided by r (del = r n)
+            n0, n1, n2 = delx * rinv, dely * rinv, delz * rinv
+            # contact-point velocity of i relative to j: v_i − v_j − a (ω_i + ω_j) × n
             arm = rad if at_radius else 0.5 * r
-            wr1 = arm * (spin[i, 0] + spin[j, 0]) * rinv
-            wr2 = arm * (spin[i, 1] + spin[j, 1]) * rinv
-            wr3 = arm * (spin[i, 2] + spin[j, 2]) * rinv
-            # normal force / r: spring on the overlap, dashpot on the normal speed
-            ccel = kn * (d - r) * rinv - damp_n * vnnr * rsqinv
-            # tangential slip at the contact point: v_t − a (ω_i + ω_j) × n
-            vtr1 = vt1 - (delz * wr2 - dely * wr3)
-            vtr2 = vt2 - (delx * wr3 - delz * wr1)
-            vtr3 = vt3 - (dely * wr1 - delx * wr2)
+            w0 = arm * (spin[i, 0] + spin[j, 0])
+            w1 = arm * (spin[i, 1] + spin[j, 1])
+            w2 = arm * (spin[i, 2] + spin[j, 2])
+            vr0 = vel[i, 0] - vel[j, 0] - (w1 * n2 - w2 * n1)
+            vr1 = vel[i, 1] - vel[j, 1] - (w2 * n0 - w0 * n2)
+            vr2 = vel[i, 2] - vel[j, 2] - (w0 * n1 - w1 * n0)
             s = shear[i, k]
-            if update_history:
-                s[0] += vtr1 * dt
-                s[1] += vtr2 * dt
-                s[2] += vtr3 * dt
-            shrmag = math.sqrt(s[0] * s[0] + s[1] * s[1] + s[2] * s[2])
-            if update_history:
-                rsht = (s[0] * delx + s[1] * dely + s[2] * delz) * rsqinv
-                s[0] -= rsht * delx
-                s[1] -= rsht * dely
-                s[2] -= rsht * delz
-            fs1 = -(kt * s[0] + damp_t * vtr1)
-            fs2 = -(kt * s[1] + damp_t * vtr2)
-            fs3 = -(kt * s[2] + damp_t * vtr3)
-            fs = math.sqrt(fs1 * fs1 + fs2 * fs2 + fs3 * fs3)
-            fn = mu * abs(ccel * r)
-            if fs > fn:
-                if shrmag != 0.0:
-                    scale = fn / fs
-                    if kt > 0.0:
-                        s[0] = scale * (s[0] + damp_t * vtr1 / kt) - damp_t * vtr1 / kt
-                        s[1] = scale * (s[1] + damp_t * vtr2 / kt) - damp_t * vtr2 / kt
-                        s[2] = scale * (s[2] + damp_t * vtr3 / kt) - damp_t * vtr3 / kt
-                    fs1 *= scale
-                    fs2 *= scale
-                    fs3 *= scale
-                else:
-                    fs1 = 0.0
-                    fs2 = 0.0
-                    fs3 = 0.0
-            fx += delx * ccel + fs1
-            fy += dely * ccel + fs2
-            fz += delz * ccel + fs3
-            # T = −a n × F_t on both grains (del × F_t / r = n × F_t)
-            tor1 = rinv * (dely * fs3 - delz * fs2)
-            tor2 = rinv * (delz * fs1 - delx * fs3)
-            tor3 = rinv * (delx * fs2 - dely * fs1)
-            tx -= arm * tor1
-            ty -= arm * tor2
-            tz -= arm * tor3
+            fn, fs1, fs2, fs3, s[0], s[1], s[2] = spring_dashpot(
+                n0, n1, n2, d - r, vr0, vr1, vr2, s[0], s[1], s[2], dt, update_history, kn, kt, damp_n, damp_t, mu)
+            fx += fn * n0 + fs1
+            fy += fn * n1 + fs2
+            fz += fn * n2 + fs3
+            # T = −a n × F_t on both grains
+            tx -= arm * (n1 * fs3 - n2 * fs2)
+            ty -= arm * (n2 * fs1 - n0 * fs3)
+            tz -= arm * (n0 * fs2 - n1 * fs1)
             if d - r > max_overlap[i]:
                 max_overlap[i] = d - r
         if touching == 0 and n_touch[i] == 0:

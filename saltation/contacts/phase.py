@@ -17,7 +17,7 @@ the step is the cubic Hermite interpolant H(s), s = t/Δt ∈ [0, 1], through (x
 (x₁, u₁) (spin: linear between ϖ₀ and ϖ₁); during the contact phase a grain is at
 ``H(s) + δx`` with velocity ``H'(s)/Δt + δu`` and spin ``ϖ(s) + δϖ``, and the deviations
 obey ``dδu/dt = F_c/m``, ``dδx/dt = δu``, ``dδϖ/dt = T_c/I`` (F_c, T_c the contact force and
-torque of contacts/pairs.py's LAMMPS-exact ``gran/hooke/history`` model, m = 1 the grain mass,
+torque of the one contact law, physics/contact_law (LAMMPS ``gran/hooke/history``), m = 1 the grain mass,
 I = 0.1) — integrated by velocity Verlet (LAMMPS ``fix nve/sphere`` order: half kick,
 drift, forces at the half-kicked velocities, half kick). Hence:
 
@@ -54,7 +54,7 @@ grain deflected by a contact can still reach a grain that had not joined: the fo
 kernel notices any contact with such a grain and *wakes* it at that sub-step (its
 deviation is exactly zero until then), so no contact is missed on deflected paths
 either. The cost of the phase is therefore n_sub × (grains close to a contact), not
-n_sub × N; ``counters[3]`` counts the grain-sub-steps actually done (and "Memory
+n_sub × N; ``counters[SUBSTEPPED]`` counts the grain-sub-steps actually done (and "Memory
 layout" below keeps their cost per grain-sub-step independent of N).
 
 The bed in the contact phase
@@ -137,8 +137,8 @@ step, and each block runs all its sub-steps while it sits in cache:
   check (a grain deflected by more than its slack toward another block) has its two
   groups joined, and the phase is redone, still in blocks, from the untouched grain
   arrays (``_release`` undoes the jump records written meanwhile); after MERGED_PASSES
-  = 3 such passes, as one block. ``counters[5]`` counts blocks run, ``counters[7]``
-  phases redone with joined groups, ``counters[6]`` phases redone as one block.
+  = 3 such passes, as one block. ``counters[BLOCKS]`` counts blocks run, ``counters[REDONE_MERGED]``
+  phases redone with joined groups, ``counters[REDONE_UNBLOCKED]`` phases redone as one block.
 
 The slacks trade group size against redone passes. The near-bed layer is dense (at
 1 % solids a quarter of the grains are sub-stepped in every step), and larger slacks
@@ -166,7 +166,9 @@ import numpy as np
 from numba import njit, prange
 
 from ..bed.jumps import close_jump
+from ..bed.packed import bed_cell, bed_offset, bed_stencil_cell
 from ..bed.virtual import virtual_bed_normal
+from ..physics.contact_law import spring_dashpot
 from ..physics.history import history_mark_impact
 from ..physics.rng import uniform2
 from .cells import build_cells, min_image, stencil_cells
@@ -187,6 +189,17 @@ BC_MIN_JUMP_DURATION, BC_MIN_JUMP_HEIGHT = 7, 8  # slots of BedContext.params (b
 BED_SLOTS = 4  # bed spheres one grain can touch at once (3 in a hollow of the packed layer)
 FREE = -1  # an empty bed-contact slot
 VIRTUAL = -2  # a slot holding a virtual bed grain
+
+# slots of ContactPhase.counters (engine/stepping.py reports them by these names)
+LIST_REBUILDS = 0  # neighbour-list rebuilds inside steps
+OVERRUNS = 1  # grains that moved further than the list's skin allowed
+WAKES = 2  # grains woken into a running sub-step set by a contact
+SUBSTEPPED = 3  # grain-sub-steps done
+MISSED = 4  # contacts found after the phase that it did not resolve
+BLOCKS = 5  # independent blocks run ("Blocks")
+REDONE_UNBLOCKED = 6  # phases redone as one block
+REDONE_MERGED = 7  # phases redone with conflicting groups merged
+N_COUNTERS = 8
 
 
 class BedContext(NamedTuple):
@@ -235,8 +248,7 @@ class ContactPhase(NamedTuple):
     bed_overlap_max: np.ndarray  # (N,) largest overlap with a bed sphere (d)
     contact_substeps: np.ndarray  # (N,) int64 Σ sub-steps in contact (statistics)
     overlap_sum: np.ndarray  # (N,) float64 Σ overlap over those sub-steps (d)
-    counters: np.ndarray  # (8,) int64: list rebuilds, overruns, wakes, sub-stepped grain-steps, missed,
-    #                       blocks run, phases redone as one block, phases redone in merged blocks ("Blocks")
+    counters: np.ndarray  # (N_COUNTERS,) int64, named by the slot constants above
     block_members: np.ndarray  # (1,) int64 most members per block (BLOCK_MEMBERS; "Blocks")
     block_slack: np.ndarray  # (5,) float64 σ (d) of candidates and of the other members (BLOCK_SLACK,
     #                          QUIET_SLACK), the same inside giant groups, giant group size (GIANT_*; "Blocks")
@@ -248,7 +260,7 @@ def make_contact_phase(n: int, block_members: int = BLOCK_MEMBERS,
     return ContactPhase(
         np.zeros(n, np.uint8), np.zeros(n, np.int64), np.zeros(1, np.int64), np.zeros(n), np.zeros((n, 3)),
         np.zeros(n), np.zeros(n), np.zeros(n), np.full(n, -1, np.int64), np.zeros(n), np.zeros(n, np.int64),
-        np.zeros(n), np.zeros(8, np.int64), np.array([block_members], np.int64),
+        np.zeros(n), np.zeros(N_COUNTERS, np.int64), np.array([block_members], np.int64),
         np.array([float(x) for x in block_slack]),
     )
 
@@ -409,9 +421,9 @@ def _state_of(cs, b, s, dt):
 
 @njit(cache=True, inline="always", error_model="numpy", _nrt=False)
 def _grain_force(a, cs, model, box, per, s, dt, h, update, blk):
-    """Contact force and torque on active member a at sub-step position s (contacts/pairs.py's
-    gran/hooke/history arithmetic, mirrored exactly so both grains of a pair compute
-    negated vectors); h: the sub-step the tangential spring advances by. box, per: the
+    """Contact force and torque on active member a at sub-step position s (the one law,
+    physics/contact_law.spring_dashpot; both grains of a pair compute exactly negated
+    vectors, as every input to it flips sign exactly); h: the sub-step the tangential spring advances by. box, per: the
     contact grid's lengths and periodic flags. A neighbour in another block than ``blk``
     is not looked at: it is out of touch for the whole step, which _conflicts checks
     afterwards ("Blocks")."""
@@ -464,64 +476,25 @@ def _grain_force(a, cs, model, box, per, s, dt, h, update, blk):
             continue
         r = math.sqrt(rsq)
         rinv = 1.0 / r
-        rsqinv = 1.0 / rsq
-        vr1 = cur[a, 3] - vj0
-        vr2 = cur[a, 4] - vj1
-        vr3 = cur[a, 5] - vj2
-        vnnr = vr1 * delx + vr2 * dely + vr3 * delz
-        vt1 = vr1 - delx * vnnr * rsqinv
-        vt2 = vr2 - dely * vnnr * rsqinv
-        vt3 = vr3 - delz * vnnr * rsqinv
+        n0, n1, n2 = delx * rinv, dely * rinv, delz * rinv
+        # contact-point velocity of a relative to b: v_a − v_b − arm (ω_a + ω_b) × n
         arm = rad if at_radius else 0.5 * r
-        wr1 = arm * (cur[a, 6] + wj0) * rinv
-        wr2 = arm * (cur[a, 7] + wj1) * rinv
-        wr3 = arm * (cur[a, 8] + wj2) * rinv
-        ccel = kn * (d - r) * rinv - damp_n * vnnr * rsqinv
-        vtr1 = vt1 - (delz * wr2 - dely * wr3)
-        vtr2 = vt2 - (delx * wr3 - delz * wr1)
-        vtr3 = vt3 - (dely * wr1 - delx * wr2)
-        if update:
-            shear[k, 0] += vtr1 * h
-            shear[k, 1] += vtr2 * h
-            shear[k, 2] += vtr3 * h
-        sh0, sh1, sh2 = shear[k, 0], shear[k, 1], shear[k, 2]
-        shrmag = math.sqrt(sh0 * sh0 + sh1 * sh1 + sh2 * sh2)
-        if update:
-            rsht = (sh0 * delx + sh1 * dely + sh2 * delz) * rsqinv
-            sh0 -= rsht * delx
-            sh1 -= rsht * dely
-            sh2 -= rsht * delz
-        fs1 = -(kt * sh0 + damp_t * vtr1)
-        fs2 = -(kt * sh1 + damp_t * vtr2)
-        fs3 = -(kt * sh2 + damp_t * vtr3)
-        fs = math.sqrt(fs1 * fs1 + fs2 * fs2 + fs3 * fs3)
-        fn = mu * abs(ccel * r)
-        if fs > fn:
-            if shrmag != 0.0:
-                scale = fn / fs
-                if kt > 0.0:
-                    sh0 = scale * (sh0 + damp_t * vtr1 / kt) - damp_t * vtr1 / kt
-                    sh1 = scale * (sh1 + damp_t * vtr2 / kt) - damp_t * vtr2 / kt
-                    sh2 = scale * (sh2 + damp_t * vtr3 / kt) - damp_t * vtr3 / kt
-                fs1 *= scale
-                fs2 *= scale
-                fs3 *= scale
-            else:
-                fs1 = 0.0
-                fs2 = 0.0
-                fs3 = 0.0
-        shear[k, 0] = sh0
-        shear[k, 1] = sh1
-        shear[k, 2] = sh2
-        fx += delx * ccel + fs1
-        fy += dely * ccel + fs2
-        fz += delz * ccel + fs3
-        tor1 = rinv * (dely * fs3 - delz * fs2)
-        tor2 = rinv * (delz * fs1 - delx * fs3)
-        tor3 = rinv * (delx * fs2 - dely * fs1)
-        tx -= arm * tor1
-        ty -= arm * tor2
-        tz -= arm * tor3
+        w0 = arm * (cur[a, 6] + wj0)
+        w1 = arm * (cur[a, 7] + wj1)
+        w2 = arm * (cur[a, 8] + wj2)
+        vr0 = cur[a, 3] - vj0 - (w1 * n2 - w2 * n1)
+        vr1 = cur[a, 4] - vj1 - (w2 * n0 - w0 * n2)
+        vr2 = cur[a, 5] - vj2 - (w0 * n1 - w1 * n0)
+        fn, fs1, fs2, fs3, shear[k, 0], shear[k, 1], shear[k, 2] = spring_dashpot(
+            n0, n1, n2, d - r, vr0, vr1, vr2, shear[k, 0], shear[k, 1], shear[k, 2], h, update,
+            kn, kt, damp_n, damp_t, mu)
+        fx += fn * n0 + fs1
+        fy += fn * n1 + fs2
+        fz += fn * n2 + fs3
+        # T = −arm n × F_t
+        tx -= arm * (n1 * fs3 - n2 * fs2)
+        ty -= arm * (n2 * fs1 - n0 * fs3)
+        tz -= arm * (n0 * fs2 - n1 * fs1)
         osum += d - r
         if d - r > omax:
             omax = d - r
@@ -545,7 +518,7 @@ def _grain_force(a, cs, model, box, per, s, dt, h, update, blk):
 def _bed_force(a, cs, st, bc, s, dt, h, update):
     """Soft contact of active member a with the bed spheres it touches at sub-step s, added
     to its force and torque (module docstring, "The bed in the contact phase").
-    The spring–dashpot of the grain pairs with a fixed partner: m_eff = m, the bed's
+    The law of the grain pairs (physics/contact_law) with a fixed partner: m_eff = m, the bed's
     restitution (γ_n from it) and friction, the same k_n and k_t."""
     cur, slot_id, slot_c = cs.cur, cs.slot_id, cs.slot_c
     px = cur[a, 0]
@@ -567,39 +540,31 @@ def _bed_force(a, cs, st, bc, s, dt, h, update):
     slot_shear = cs.slot_shear
     if update and py < 0.5:
         if packed:
-            lx, lz = bc.box[0], bc.box[2]
-            nx, nz = bc.ncell[0], bc.ncell[2]
-            sx = px - lx * math.floor(px / lx)
-            sz = pz - lz * math.floor(pz / lz)
-            ix = min(int(sx / bc.size[0]), nx - 1)
-            iz = min(int(sz / bc.size[2]), nz - 1)
-            for ca in range(-1, 2):
-                for cb in range(-1, 2):
-                    c = ((ix + ca) % nx) * nz + (iz + cb) % nz
-                    for q in range(bc.cell_start[c], bc.cell_start[c] + bc.cell_count[c]):
-                        kb = bc.order[q]
-                        ax = min_image(px - bc.centres[kb, 0], lx, 1)
-                        ay = py - bc.centres[kb, 1]
-                        az = min_image(pz - bc.centres[kb, 2], lz, 1)
-                        if ax * ax + ay * ay + az * az >= 1.0:
-                            continue
-                        known = False
-                        free = -1
-                        for k in range(BED_SLOTS):
-                            if slot_id[a, k] == kb:
-                                known = True
-                            elif slot_id[a, k] == FREE and free < 0:
-                                free = k
-                        if known or free < 0:
-                            continue
-                        slot_id[a, free] = kb
-                        slot_c[a, free, 0] = px - ax
-                        slot_c[a, free, 1] = py - ay
-                        slot_c[a, free, 2] = pz - az
-                        slot_shear[a, free, 0] = 0.0
-                        slot_shear[a, free, 1] = 0.0
-                        slot_shear[a, free, 2] = 0.0
-                        used += 1
+            ix, iz = bed_cell(bc, px, pz)
+            for sc in range(9):
+                c = bed_stencil_cell(bc, ix, iz, sc)
+                for q in range(bc.cell_start[c], bc.cell_start[c] + bc.cell_count[c]):
+                    kb = bc.order[q]
+                    ax, ay, az = bed_offset(bc, kb, px, py, pz)
+                    if ax * ax + ay * ay + az * az >= 1.0:
+                        continue
+                    known = False
+                    free = -1
+                    for k in range(BED_SLOTS):
+                        if slot_id[a, k] == kb:
+                            known = True
+                        elif slot_id[a, k] == FREE and free < 0:
+                            free = k
+                    if known or free < 0:
+                        continue
+                    slot_id[a, free] = kb
+                    slot_c[a, free, 0] = px - ax
+                    slot_c[a, free, 1] = py - ay
+                    slot_c[a, free, 2] = pz - az
+                    slot_shear[a, free, 0] = 0.0
+                    slot_shear[a, free, 1] = 0.0
+                    slot_shear[a, free, 2] = 0.0
+                    used += 1
         elif used == 0:
             # virtual bed: a bed grain of diameter d placed where the grain's bottom
             # crossed the bed top, its normal tilted at random (bed.virtual.virtual_bed_normal)
@@ -646,53 +611,24 @@ def _bed_force(a, cs, st, bc, s, dt, h, update):
             continue
         r = math.sqrt(rsq)
         rinv = 1.0 / r
-        rsqinv = 1.0 / rsq
-        vr1 = cur[a, 3]
-        vr2 = cur[a, 4]
-        vr3 = cur[a, 5]
-        vnnr = vr1 * delx + vr2 * dely + vr3 * delz
-        vt1 = vr1 - delx * vnnr * rsqinv
-        vt2 = vr2 - dely * vnnr * rsqinv
-        vt3 = vr3 - delz * vnnr * rsqinv
-        arm = 0.5 * r  # contact point midway between equal spheres
-        wr1 = arm * cur[a, 6] * rinv
-        wr2 = arm * cur[a, 7] * rinv
-        wr3 = arm * cur[a, 8] * rinv
-        ccel = kn * (1.0 - r) * rinv - damp_n * vnnr * rsqinv
-        vtr1 = vt1 - (delz * wr2 - dely * wr3)
-        vtr2 = vt2 - (delx * wr3 - delz * wr1)
-        vtr3 = vt3 - (dely * wr1 - delx * wr2)
-        sh0, sh1, sh2 = slot_shear[a, k, 0], slot_shear[a, k, 1], slot_shear[a, k, 2]
-        if update:
-            sh0 += vtr1 * h
-            sh1 += vtr2 * h
-            sh2 += vtr3 * h
-            rsht = (sh0 * delx + sh1 * dely + sh2 * delz) * rsqinv
-            sh0 -= rsht * delx
-            sh1 -= rsht * dely
-            sh2 -= rsht * delz
-        fs1 = -kt * sh0
-        fs2 = -kt * sh1
-        fs3 = -kt * sh2
-        fs = math.sqrt(fs1 * fs1 + fs2 * fs2 + fs3 * fs3)
-        fn = mu * abs(ccel * r)
-        if fs > fn:
-            scale = fn / fs
-            sh0 *= scale
-            sh1 *= scale
-            sh2 *= scale
-            fs1 *= scale
-            fs2 *= scale
-            fs3 *= scale
-        slot_shear[a, k, 0] = sh0
-        slot_shear[a, k, 1] = sh1
-        slot_shear[a, k, 2] = sh2
-        fx += delx * ccel + fs1
-        fy += dely * ccel + fs2
-        fz += delz * ccel + fs3
-        tx -= arm * rinv * (dely * fs3 - delz * fs2)
-        ty -= arm * rinv * (delz * fs1 - delx * fs3)
-        tz -= arm * rinv * (delx * fs2 - dely * fs1)
+        n0, n1, n2 = delx * rinv, dely * rinv, delz * rinv
+        # the bed sphere is fixed: contact-point velocity v − arm ω × n, arm midway
+        arm = 0.5 * r
+        w0 = arm * cur[a, 6]
+        w1 = arm * cur[a, 7]
+        w2 = arm * cur[a, 8]
+        vr0 = cur[a, 3] - (w1 * n2 - w2 * n1)
+        vr1 = cur[a, 4] - (w2 * n0 - w0 * n2)
+        vr2 = cur[a, 5] - (w0 * n1 - w1 * n0)
+        fn, fs1, fs2, fs3, slot_shear[a, k, 0], slot_shear[a, k, 1], slot_shear[a, k, 2] = spring_dashpot(
+            n0, n1, n2, 1.0 - r, vr0, vr1, vr2, slot_shear[a, k, 0], slot_shear[a, k, 1], slot_shear[a, k, 2],
+            h, update, kn, kt, damp_n, 0.0, mu)
+        fx += fn * n0 + fs1
+        fy += fn * n1 + fs2
+        fz += fn * n2 + fs3
+        tx -= arm * (n1 * fs3 - n2 * fs2)
+        ty -= arm * (n2 * fs1 - n0 * fs3)
+        tz -= arm * (n0 * fs2 - n1 * fs1)
         if 1.0 - r > cs.bed_overlap_max[a]:
             cs.bed_overlap_max[a] = 1.0 - r
     ft = cs.ft
@@ -1254,7 +1190,7 @@ def _wake_up(cs, x0w, st, bc, model, cl, ph, s, dt, h, update, lo, hi, app, blk)
         first_round = False
         if q_new == q_hi:
             break
-        ph.counters[2] += q_new - q_hi
+        ph.counters[WAKES] += q_new - q_hi
         for t in range(q_hi, q_new):
             b = cs.queue[t]
             if cs.has_row[b] == 0:
@@ -1288,7 +1224,7 @@ def _run_block(cs, cand, c0, c1, lo, hi, blk, x0w, st, bc, model, cl, ph, dt, n_
         # grains that may touch something before s_next join now (no force at s_k: they
         # cannot be touching anything yet)
         ptr = _join(cs, cand, ptr, c1, s_next, k / n_sub, dt)
-        ph.counters[3] += cs.n_act[0] - act0
+        ph.counters[SUBSTEPPED] += cs.n_act[0] - act0
         if _kick_drift_forces(cs, st, bc, model, box, per, s_next, dt, h, lo, hi, app, blk) > 0:
             cs = _wake_up(cs, x0w, st, bc, model, cl, ph, s_next, dt, h, True, lo, hi, app, blk)
         _kick(cs, model, h, lo, hi, app)
@@ -1440,7 +1376,7 @@ def soft_contact_phase(st, x0w, model, cl, ph, bc, t0, step, dt, n_sub, cs):
             for a in range(3):
                 ph.x0pos[i, a] = x0w[i, a]
         cl = rebuild(ph.x0pos, cl)
-        ph.counters[0] += 1
+        ph.counters[LIST_REBUILDS] += 1
         fastest = 0.0
         for i in range(n):
             ph.ref_bound[i] = ph.reach[i]  # the list is now built at x₀
@@ -1455,7 +1391,7 @@ def soft_contact_phase(st, x0w, model, cl, ph, bc, t0, step, dt, n_sub, cs):
                 skin_half = 0.5 * cl.skin
             for i in range(n):
                 if ph.reach[i] > skin_half:  # still too fast: a contact might be missed
-                    ph.counters[1] += 1
+                    ph.counters[OVERRUNS] += 1
     _engage(x0w, pos, model, cl, ph, bc)
     ph.n_act[0] = 0
     n_cand = 0
@@ -1469,7 +1405,7 @@ def soft_contact_phase(st, x0w, model, cl, ph, bc, t0, step, dt, n_sub, cs):
     # time they may first touch something (docstring: who is sub-stepped)
     d = model.diameter
     box, per = cl.grid.box, cl.grid.periodic
-    wakes0, done0 = ph.counters[2], ph.counters[3]
+    wakes0, done0 = ph.counters[WAKES], ph.counters[SUBSTEPPED]
     forced = np.empty(0, np.int64)  # groups joined after a failed pass (_conflicts)
     passes = 0
     while True:
@@ -1479,7 +1415,7 @@ def soft_contact_phase(st, x0w, model, cl, ph, bc, t0, step, dt, n_sub, cs):
             if cstart[b + 1] > cstart[b]:
                 cs = _run_block(cs, cand, cstart[b], cstart[b + 1], mstart[b], mstart[b + 1], b, x0w, st, bc,
                                 model, cl, ph, dt, n_sub)
-        ph.counters[5] += n_blocks
+        ph.counters[BLOCKS] += n_blocks
         if n_blocks == 1:
             break
         if forced.shape[0] == 0:
@@ -1489,16 +1425,16 @@ def soft_contact_phase(st, x0w, model, cl, ph, bc, t0, step, dt, n_sub, cs):
         # a deflected grain came near one of another block: redo the phase with the two
         # groups joined (after MERGED_PASSES such passes, as one block)
         passes += 1
-        ph.counters[6 if passes > MERGED_PASSES else 7] += 1
+        ph.counters[REDONE_UNBLOCKED if passes > MERGED_PASSES else REDONE_MERGED] += 1
         _release(cs, st, ph)
-        ph.counters[2] = wakes0
-        ph.counters[3] = done0
+        ph.counters[WAKES] = wakes0
+        ph.counters[SUBSTEPPED] = done0
     over = _scatter(cs, st, cl, bc, ph, skin_half)
     if over > 0:
         # a grain may have left the list's reach: look for pairs in contact now that the
         # list does not hold (an actual miss), with fresh cells
-        ph.counters[1] += over
-        ph.counters[4] += _missed_contacts(st.pos, cl)
+        ph.counters[OVERRUNS] += over
+        ph.counters[MISSED] += _missed_contacts(st.pos, cl)
     return cl, cs
 
 

@@ -425,12 +425,12 @@ class ClusterSimulation(Simulation):
             "component_contact_substeps": sub,
         }
         out["contact_phase"] = {
-            "list_builds": int(cc.counters[0]),
-            "overruns": int(cc.counters[1]),
+            "list_builds": int(cc.counters[cluster_contacts.LIST_BUILDS]),
+            "overruns": int(cc.counters[cluster_contacts.OVERRUNS]),
             "overruns_are": "grain-sub-steps whose contact deviation exceeded half the skin (list rebuilt; "
                             "a grain that was not sub-stepped could then be reached unseen)",
-            "substepped_grain_substeps": int(cc.counters[2]),
-            "engaged_grain_steps": int(cc.counters[3]),
+            "substepped_grain_substeps": int(cc.counters[cluster_contacts.SUBSTEPPED]),
+            "engaged_grain_steps": int(cc.counters[cluster_contacts.ENGAGED]),
         }
         return out
 

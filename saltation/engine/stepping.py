@@ -27,6 +27,7 @@ from numba import njit, objmode, prange
 
 from ..bed.jumps import BED_MIN_JUMP_DURATION, BED_MIN_JUMP_HEIGHT
 from ..bed.packed import make_packed_bed, packed_bed_check_particle
+from ..contacts import phase
 from ..contacts.pairs import contact_model_from_case, make_contact_list, rebuild
 from ..contacts.phase import (
     MERGED_PASSES,
@@ -248,17 +249,17 @@ class Stepper:
                 "bed_is": "largest overlap of a sub-stepped grain with a (soft) bed sphere",
             }
             out["contact_phase"] = {
-                "list_rebuilds_in_steps": int(ph.counters[0]),
+                "list_rebuilds_in_steps": int(ph.counters[phase.LIST_REBUILDS]),
                 "list_builds_total": int(cl.builds[0]),
-                "overruns": int(ph.counters[1]),
-                "missed_contacts": int(ph.counters[4]),
+                "overruns": int(ph.counters[phase.OVERRUNS]),
+                "missed_contacts": int(ph.counters[phase.MISSED]),
                 "overruns_are": "grain-steps whose path may have left the neighbour list's reach "
                                 "(then checked: missed_contacts = pairs found in contact but not listed)",
-                "wakes": int(ph.counters[2]),
-                "substepped_grain_substeps": int(ph.counters[3]),
-                "blocks": int(ph.counters[5]),
-                "phases_redone_merged": int(ph.counters[7]),
-                "phases_redone_unblocked": int(ph.counters[6]),
+                "wakes": int(ph.counters[phase.WAKES]),
+                "substepped_grain_substeps": int(ph.counters[phase.SUBSTEPPED]),
+                "blocks": int(ph.counters[phase.BLOCKS]),
+                "phases_redone_merged": int(ph.counters[phase.REDONE_MERGED]),
+                "phases_redone_unblocked": int(ph.counters[phase.REDONE_UNBLOCKED]),
                 "blocks_are": "groups of grains sub-stepped together, out of touch with the other blocks "
                               "(contacts/phase.py, \"Blocks\"); when two blocks' grains came near each other the "
                               f"phase is redone with their groups joined (merged), after {MERGED_PASSES} such "

@@ -103,6 +103,7 @@ from flowfields.sampler import ABOVE_TOP, sample_column, sample_point, vorticity
 
 from ..bed.jumps import BED_MIN_JUMP_DURATION, BED_MIN_JUMP_HEIGHT, close_jump
 from ..bed.virtual import BED_MODEL, virtual_bed_normal
+from ..grains.status import JUMP_FIELDS, NOT_FINITE, OK
 from ..physics import history
 from ..physics.forces import (
     C_OMEGA,
@@ -133,9 +134,6 @@ from ..physics.history import (
 from ..physics.rng import uniform2
 from ..physics.spin import SPIN_TABLE_C, _spin_row
 
-OK = 0
-NOT_FINITE = 1
-JUMP_FIELDS = 4
 NX = 13  # x(3) v(3) q(4) Ω(3)
 SQRT_PI = math.sqrt(math.pi)
 # bed[BED_MODEL] (bed/virtual.py): 0 → the virtual bed here; BED_PACKED → bed/packed_composites.py

@@ -28,6 +28,7 @@ from numba import njit
 
 from ..bed.jumps import BED_MIN_JUMP_DURATION, BED_MIN_JUMP_HEIGHT, close_jump
 from ..bed.virtual import bed_rebound, virtual_bed_normal
+from ..grains.status import JUMP_FIELDS, NOT_FINITE, OK
 from ..physics import history
 from ..physics.fluid import fluid_at_grain, gather_at, grain_velocity, locate_grain, same_cell
 from ..physics.forces import (
@@ -55,12 +56,6 @@ from ..physics.spin import spin_rate
 
 RADIUS = 0.5  # grain radius in particle units
 
-# status codes (per particle)
-OK = 0
-NOT_FINITE = 1
-
-# jump record columns: t_start, length, height, duration
-JUMP_FIELDS = 4
 
 
 class GrainState(NamedTuple):
