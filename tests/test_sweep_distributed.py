@@ -118,15 +118,18 @@ def dask_cluster(tmp_path, request):
             client.wait_for_workers(2, timeout=90)
         yield address, workers, logs
     finally:
-        for p in reversed(procs):  # workers first, the scheduler last
-            if p.poll() is None:
-                p.terminate()
-        for p in reversed(procs):
-            try:
-                p.wait(timeout=15)
-            except subprocess.TimeoutExpired:
-                p.kill()
-                p.wait()
+        # the workers first, then the scheduler: a worker told to stop while its scheduler
+        # closes can hang in Dask's shutdown (then it is killed)
+        for group in (procs[1:], procs[:1]):
+            for p in group:
+                if p.poll() is None:
+                    p.terminate()
+            for p in group:
+                try:
+                    p.wait(timeout=15)
+                except subprocess.TimeoutExpired:
+                    p.kill()
+                    p.wait()
 
 
 def _checkpoint_step(path: Path) -> int:
@@ -300,3 +303,14 @@ def test_killed_worker_message_names_the_cause_and_the_checkpoint(tmp_path):
     np.savez(tmp_path / CHECKPOINT, meta=meta)
     assert "its checkpoint at step 1234 is kept: run the same command again to resume it" in _failure(err, tmp_path)
     assert _failure(ValueError("boom"), tmp_path) == "ValueError: boom"
+
+
+def test_the_full_size_paper_case_file():
+    """cases/paper_full_c0.52.toml: one case, the paper's domain at C = 0.52 %, as its comment says."""
+    from saltation.case.schema import load_case, resolve_domain
+
+    sw = load_sweep(ROOT / "cases" / "paper_full_c0.52.toml")
+    assert [c.name for c in sw.cases] == ["c0.52_t1.79"]
+    case = resolve_domain(load_case(sw.cases[0].tables, sw.cases[0].values))
+    assert tuple(case.run.domain) == (0.176, 0.088, 0.028)
+    assert case.n_particles == 13110 and case.n_steps == 9165
