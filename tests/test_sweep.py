@@ -153,5 +153,5 @@ def test_sweep_on_an_existing_scheduler(tmp_path):
     log: list[str] = []
     with LocalCluster(n_workers=1, threads_per_worker=1, processes=False, dashboard_address=None) as cluster:
         df = run_sweep(path, out=tmp_path / "remote", scheduler=cluster.scheduler_address, echo=log.append)
-    assert any(line.startswith(f"scheduler {cluster.scheduler_address}: 1 workers") for line in log)
+    assert any(line.startswith(f"scheduler {cluster.scheduler_address}: 1 worker(s), 1 case(s) at a time") for line in log)
     assert list(df["case"]) == ["t2_s2"] and df["status"].iloc[0] == "completed"

@@ -26,14 +26,32 @@ Cluster: a ``LocalCluster`` on loopback (127.0.0.1, no dashboard) with ``workers
 single-task processes, each running its case's Numba kernels on ``threads_per_worker``
 threads (``run.threads``); by default workers × threads = the cores available, one case
 per core while there are more cases than cores. ``scheduler="tcp://HOST:PORT"`` uses an
-existing cluster instead; start its workers with ``--nthreads 1`` so that each runs one
-case at a time, with ``threads_per_worker`` Numba threads.
+existing cluster instead (``dask scheduler`` and ``dask worker`` processes; tested with
+two workers on loopback in tests/test_sweep_distributed.py). Start its workers with
+``--nthreads 1``, so that each process runs one case at a time; ``threads_per_worker``
+Numba threads per case, by default each host's cores shared among the task threads of
+the workers on it (the smallest share over the hosts at the start). The sweep folder is
+given to the workers as an absolute path: every worker must see it at that path (one
+machine, or a shared file system). The workers must import the same saltation.
+
+Workers that die: a case whose worker process dies (killed, out of memory, a crash) is
+resubmitted by Dask to another worker and resumes from its last checkpoint — the result
+is that of an uninterrupted run, bit for bit, and its summary.json says
+``resumed_from_step``; the progress line says "resumed from step N". After
+``distributed.scheduler.allowed-failures`` + 1 lost workers (4 by default) Dask gives the
+case up (``KilledWorker``): it is reported as failed, with that reason and its checkpoint
+step, and the other cases go on; running the sweep again resumes it. Each case is
+counted once. Ctrl-C stops a LocalCluster's cases with its workers; on an existing
+cluster the cases already running go on to the end of their run on their workers (Dask
+cannot stop a running task), and a sweep started again meanwhile finds their run
+directories locked ("in use by another run") until they finish.
 
 Results: ``OUT/results.parquet``, one row per case (the grid values, then the numbers of
 its summary.json: see :data:`RESULT_COLUMNS`), also returned as a DataFrame.
 """
 from __future__ import annotations
 
+import hashlib
 import itertools
 import json
 import math
@@ -394,6 +412,64 @@ def _cost(case: SweepCase) -> int:
     return int(c.n_particles) * int(c.n_steps)
 
 
+def _worker_cores() -> int:
+    """The cores this (worker) process may use; run on the workers by _remote_plan."""
+    return _cores()
+
+
+def _remote_plan(client, address: str, threads_per_worker: int | None) -> tuple[int, str]:
+    """(Numba threads per case, the status line) on an existing scheduler's workers.
+
+    threads_per_worker absent: each host's cores shared among the task threads of the
+    workers on it (one case per task thread), the smallest share over the hosts, at least
+    1; workers that join later get the same number."""
+    workers = client.scheduler_info(n_workers=-1).get("workers", {})
+    slots = sum(w.get("nthreads", 1) for w in workers.values())
+    if threads_per_worker:
+        threads = threads_per_worker
+    elif workers:
+        cores = client.run(_worker_cores)  # {worker address: cores}
+        per_host: dict[str, int] = {}
+        for w in workers.values():
+            per_host[w["host"]] = per_host.get(w["host"], 0) + w.get("nthreads", 1)
+        threads = max(1, min(cores[a] // per_host[w["host"]] for a, w in workers.items() if a in cores))
+    else:
+        threads = 1
+    if not workers:
+        return threads, (f"scheduler {address}: no workers yet: the cases wait for one; "
+                         f"{threads} Numba thread(s) per case")
+    line = (f"scheduler {address}: {len(workers)} worker(s), {slots} case(s) at a time; "
+            f"{threads} Numba thread(s) per case")
+    multi = sorted(w.get("name", a) for a, w in workers.items() if w.get("nthreads", 1) > 1)
+    if multi:
+        line += (f" (worker(s) {', '.join(map(str, multi))} run several cases in one process: "
+                 f"start them with --nthreads 1)")
+    return threads, line
+
+
+def _failure(err: BaseException, directory: Path) -> str:
+    """A failed case's message; a case whose workers kept dying says so, and where it stands."""
+    from ..io.run_directory import CHECKPOINT_NAME
+
+    if type(err).__name__ != "KilledWorker":
+        return f"{type(err).__name__}: {err}"
+    tries = getattr(err, "allowed_failures", 3) + 1
+    last = getattr(getattr(err, "last_worker", None), "address", "?")
+    step = None
+    try:
+        import numpy as np
+
+        with np.load(directory / CHECKPOINT_NAME) as z:
+            step = json.loads(bytes(z["meta"]).decode()).get("step")
+    except (OSError, ValueError, KeyError):
+        pass
+    where = (f"its checkpoint at step {step} is kept: run the same command again to resume it" if step is not None
+             else "it left no checkpoint: run the same command again to start it afresh")
+    return (f"KilledWorker: the worker process running this case died, on {tries} worker(s) in turn (killed, out "
+            f"of memory, or a crash; the last was {last}), and the scheduler gives a case up after "
+            f"distributed.scheduler.allowed-failures + 1 = {tries} lost worker(s); {where}")
+
+
 def run_sweep(source, out=None, scheduler: str | None = None, workers: int | None = None,
               threads_per_worker: int | None = None, processes: bool = True,
               echo: Callable[[str], None] | None = print) -> pd.DataFrame:
@@ -425,9 +501,10 @@ def run_sweep(source, out=None, scheduler: str | None = None, workers: int | Non
         n_workers, threads = plan_workers(len(todo), workers, threads_per_worker)
         if scheduler:
             cluster, client = None, Client(scheduler)
-            threads = threads_per_worker or 1
-            say(f"scheduler {scheduler}: {len(client.scheduler_info().get('workers', {}))} workers; "
-                f"{threads} Numba thread(s) per case")
+            threads, line = _remote_plan(client, scheduler, threads_per_worker)
+            say(line)
+            if workers is not None:
+                say(f"workers = {workers} is for a LocalCluster; the scheduler's workers run the cases")
         else:
             if not processes:
                 n_workers = 1  # Numba's thread pool serves one launching thread at a time
@@ -440,24 +517,30 @@ def run_sweep(source, out=None, scheduler: str | None = None, workers: int | Non
             say(f"LocalCluster on {where}: {n_workers} worker(s) x {threads} Numba thread(s)")
         try:
             futures = {}
+            # task keys name the sweep folder too: two sweeps of one file on one scheduler stay apart
+            tag = hashlib.sha1(str(out.absolute()).encode()).hexdigest()[:8]
             # dearest first (grains × steps), so that no long case starts last and runs alone
             for c in sorted(todo, key=lambda c: -_cost(c)):
                 fut = client.submit(run_case, c.tables, c.values, c.name, str((out / "cases" / c.name).absolute()),
-                                    threads, key=f"saltation-{stem}-{c.name}", pure=False)
+                                    threads, key=f"saltation-{stem}-{c.name}-{tag}", pure=False)
                 futures[fut] = c
             try:
                 for fut in as_completed(futures):
-                    c = futures[fut]
+                    c = futures.pop(fut, None)  # each case once, however often Dask ran it
+                    if c is None:
+                        continue
                     done += 1
                     try:
                         s = fut.result()
                         j = s["jumps"]
                         stats = (f"H {j['H_mean']:.2f} d, L {j['L_mean']:.1f} d, U {j['U_mean']:.2f} u*"
                                  if j.get("count") else "no jumps counted")
-                        say(f"[{done}/{total}] {c.name}: {s['status']}, N = {s['n_particles']}, {stats}, "
+                        resumed = (f" (resumed from step {s['resumed_from_step']})"
+                                   if s.get("resumed_from_step") is not None else "")
+                        say(f"[{done}/{total}] {c.name}: {s['status']}{resumed}, N = {s['n_particles']}, {stats}, "
                             f"wall {s['timing']['wall_s']:.1f} s")
                     except Exception as err:  # noqa: BLE001 - one failed case must not stop the others
-                        failures[c.name] = f"{type(err).__name__}: {err}"
+                        failures[c.name] = _failure(err, out / "cases" / c.name)
                         say(f"[{done}/{total}] {c.name}: FAILED {failures[c.name]}")
             except KeyboardInterrupt as err:
                 # Ctrl-C: the cases in flight stop with the workers (their last periodic
