@@ -123,7 +123,10 @@ on i is ``J_n = −(1+e) (m/2) u_n``. A tangential impulse J_t on i changes the 
 the bed rebound (SPEC §4), since both the normal and the tangential effective masses
 halve; otherwise sliding ``J_t = −f J_n ĉ_t``. Each grain's spin changes by
 ``−(d/2) n × J_t / I``. Momentum is conserved exactly in pairs and energy is never created
-(e ≤ 1, and the tangential impulse never reverses the slip).
+(e ≤ 1, and the tangential impulse never reverses the slip). Impulses act on approaching
+pairs only, so nothing would stop grains pressed together by their weight from sinking
+into each other: after the impulses ``push_apart`` moves overlapping pairs apart along
+their normal (positions only, a few Gauss–Seidel sweeps, as the packed bed's push-out).
 """
 from __future__ import annotations
 
@@ -157,12 +160,14 @@ __all__ = [
     "reset_counters",
     "binary_impulse",
     "hard_sphere_collisions",
+    "push_apart",
     "random_gas",
 ]
 
 LEVER_CONTACT_POINT = 0  # lever arm r/2 (midway between centres): angular momentum exact
 LEVER_RADIUS = 1  # lever arm d/2, as LAMMPS gran/hooke/history
 
+HARD_PUSH_SWEEPS = 8  # Gauss–Seidel sweeps of push_apart (the hard-sphere option)
 _CHUNKS = 64  # fixed reduction chunks: sums do not depend on the thread count
 
 
@@ -740,6 +745,65 @@ def hard_sphere_collisions(pos, vel, spin, cl, restitution, friction, diameter):
                     cl.collisions[j] += 1
                     count += 1
     return count
+
+
+@njit(cache=True)
+def push_apart(pos, cl, diameter, floor, moved):
+    """Remove the overlaps binary impulses leave (hard-sphere option): every pair closer
+    than d is moved apart along its normal, half the overlap each, in ``HARD_PUSH_SWEEPS``
+    Gauss–Seidel sweeps in a fixed pair order (serial, deterministic). A grain is not
+    pushed below ``floor`` (the lowest centre height the bed allows): its partner takes
+    the whole correction. Positions only, as the packed bed's push-out (bed/packed.py):
+    velocities keep what the impulses gave. ``moved`` (N,) int64 is set to 1 for the
+    grains moved. Returns the largest overlap found before the first sweep (d).
+
+    Without this, impulses act only on approaching pairs and nothing stops grains pressed
+    together by their weight from sinking into each other: in the dense near-bed layer
+    (3.94 %) overlaps reached 0.31 d at the 99th percentile and 0.63 d at most."""
+    g = cl.grid
+    d2 = diameter * diameter
+    cells = np.empty(27, np.int64)
+    worst = 0.0
+    for sweep in range(HARD_PUSH_SWEEPS):
+        build_cells(pos, g, cl.cell_of, cl.cell_start, cl.cell_count, cl.order)
+        pushed = 0
+        for i in range(pos.shape[0]):
+            m = stencil_cells(g, cl.cell_of[i], cells)
+            for s in range(m):
+                c = cells[s]
+                for q in range(cl.cell_start[c], cl.cell_start[c] + cl.cell_count[c]):
+                    j = cl.order[q]
+                    if j <= i:
+                        continue
+                    dx = min_image(pos[i, 0] - pos[j, 0], g.box[0], g.periodic[0])
+                    dy = min_image(pos[i, 1] - pos[j, 1], g.box[1], g.periodic[1])
+                    dz = min_image(pos[i, 2] - pos[j, 2], g.box[2], g.periodic[2])
+                    rsq = dx * dx + dy * dy + dz * dz
+                    if rsq >= d2 or rsq == 0.0:
+                        continue
+                    r = math.sqrt(rsq)
+                    overlap = diameter - r
+                    if sweep == 0 and overlap > worst:
+                        worst = overlap
+                    # shares of the correction along n = (x_i − x_j)/r: i up n, j down n
+                    si = 0.5 * overlap
+                    sj = 0.5 * overlap
+                    if pos[i, 1] + si * dy / r < floor:
+                        si, sj = 0.0, overlap
+                    elif pos[j, 1] - sj * dy / r < floor:
+                        si, sj = overlap, 0.0
+                    pos[i, 0] += si * dx / r
+                    pos[i, 1] += si * dy / r
+                    pos[i, 2] += si * dz / r
+                    pos[j, 0] -= sj * dx / r
+                    pos[j, 1] -= sj * dy / r
+                    pos[j, 2] -= sj * dz / r
+                    moved[i] = 1
+                    moved[j] = 1
+                    pushed += 1
+        if pushed == 0:
+            break
+    return worst
 
 
 def kinetic_energy_total(vel, spin, model: ContactModel) -> float:

@@ -172,7 +172,7 @@ from ..physics.contact_law import spring_dashpot
 from ..physics.history import history_mark_impact
 from ..physics.rng import uniform2
 from .cells import build_cells, min_image, stencil_cells
-from .pairs import LEVER_RADIUS, ContactList, hard_sphere_collisions, normal_damping, rebuild
+from .pairs import LEVER_RADIUS, ContactList, hard_sphere_collisions, normal_damping, push_apart, rebuild
 
 __all__ = ["ContactPhase", "SubstepSet", "BedContext", "make_contact_phase", "make_bed_context", "soft_contact_phase",
            "empty_substep_set",
@@ -1473,9 +1473,11 @@ def _missed_contacts(pos, cl):
 
 @njit(cache=True)
 def hard_contact_phase(st, cl, restitution, friction, before):
-    """Binary hard-sphere impulses at the end-of-flight positions (contacts/pairs.py); grains
-    that collided restart their Basset history (their position is unchanged, so the
-    fluid sample stays valid). ``before`` (N,) int64 scratch. Returns the collisions."""
+    """Binary hard-sphere impulses at the end-of-flight positions, then the overlaps
+    removed (contacts/pairs.py: hard_sphere_collisions, push_apart; no centre pushed below
+    the bed top). Grains that collided restart their Basset history; grains moved take a
+    fresh fluid sample at their new position next step. ``before`` (N,) int64 scratch.
+    Returns the collisions."""
     n = st.pos.shape[0]
     for i in range(n):
         before[i] = cl.collisions[i]
@@ -1484,4 +1486,10 @@ def hard_contact_phase(st, cl, restitution, friction, before):
         for i in range(n):
             if cl.collisions[i] != before[i]:
                 history_mark_impact(st.hist_meta[i])  # the next step takes the slip step (physics/history.py)
+    for i in range(n):
+        before[i] = 0
+    push_apart(st.pos, cl, 1.0, 0.5, before)
+    for i in range(n):
+        if before[i] != 0:
+            st.fresh[i] = 0
     return count
