@@ -475,7 +475,7 @@ class CollisionsConfig(_Table):
     model: str = _key("soft", kind="choice", choices=("soft", "hard", "off"),
                       doc='particle–particle contacts: "soft" (spring–dashpot, sub-stepped; '
                           'the default and the reference), "hard" (binary impulse at step ends, '
-                          'overlaps pushed apart; measured 4–17 % lower H and L than soft at '
+                          'overlaps pushed apart; measured 9–17 % lower H and L than soft at '
                           '0.52–3.94 %: a cheap approximation) or "off"')
     restitution: float = _key(0.65, kind="float", ge=0.0, le=1.0,
                               doc="grain–grain restitution e (Schmeeckle et al. 2001)")
