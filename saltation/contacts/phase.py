@@ -168,7 +168,7 @@ from numba import njit, prange
 from ..bed.jumps import close_jump
 from ..bed.packed import bed_cell, bed_offset, bed_stencil_cell
 from ..bed.virtual import virtual_bed_normal
-from ..physics.contact_law import spring_dashpot
+from ..physics.contact_law import lever_torque, sphere_contact_velocity, spring_dashpot
 from ..physics.history import history_mark_impact
 from ..physics.rng import uniform2
 from .cells import build_cells, min_image, stencil_cells
@@ -477,24 +477,19 @@ def _grain_force(a, cs, model, box, per, s, dt, h, update, blk):
         r = math.sqrt(rsq)
         rinv = 1.0 / r
         n0, n1, n2 = delx * rinv, dely * rinv, delz * rinv
-        # contact-point velocity of a relative to b: v_a − v_b − arm (ω_a + ω_b) × n
         arm = rad if at_radius else 0.5 * r
-        w0 = arm * (cur[a, 6] + wj0)
-        w1 = arm * (cur[a, 7] + wj1)
-        w2 = arm * (cur[a, 8] + wj2)
-        vr0 = cur[a, 3] - vj0 - (w1 * n2 - w2 * n1)
-        vr1 = cur[a, 4] - vj1 - (w2 * n0 - w0 * n2)
-        vr2 = cur[a, 5] - vj2 - (w0 * n1 - w1 * n0)
+        vr0, vr1, vr2 = sphere_contact_velocity(n0, n1, n2, arm, cur[a, 3] - vj0, cur[a, 4] - vj1, cur[a, 5] - vj2,
+                                                cur[a, 6] + wj0, cur[a, 7] + wj1, cur[a, 8] + wj2)
         fn, fs1, fs2, fs3, shear[k, 0], shear[k, 1], shear[k, 2] = spring_dashpot(
             n0, n1, n2, d - r, vr0, vr1, vr2, shear[k, 0], shear[k, 1], shear[k, 2], h, update,
             kn, kt, damp_n, damp_t, mu)
         fx += fn * n0 + fs1
         fy += fn * n1 + fs2
         fz += fn * n2 + fs3
-        # T = −arm n × F_t
-        tx -= arm * (n1 * fs3 - n2 * fs2)
-        ty -= arm * (n2 * fs1 - n0 * fs3)
-        tz -= arm * (n0 * fs2 - n1 * fs1)
+        t0, t1, t2 = lever_torque(n0, n1, n2, arm, fs1, fs2, fs3)  # T = −arm n × F_t
+        tx -= t0
+        ty -= t1
+        tz -= t2
         osum += d - r
         if d - r > omax:
             omax = d - r
@@ -612,23 +607,20 @@ def _bed_force(a, cs, st, bc, s, dt, h, update):
         r = math.sqrt(rsq)
         rinv = 1.0 / r
         n0, n1, n2 = delx * rinv, dely * rinv, delz * rinv
-        # the bed sphere is fixed: contact-point velocity v − arm ω × n, arm midway
+        # the bed sphere is fixed (v = 0, ω = 0); contact point midway between equal spheres
         arm = 0.5 * r
-        w0 = arm * cur[a, 6]
-        w1 = arm * cur[a, 7]
-        w2 = arm * cur[a, 8]
-        vr0 = cur[a, 3] - (w1 * n2 - w2 * n1)
-        vr1 = cur[a, 4] - (w2 * n0 - w0 * n2)
-        vr2 = cur[a, 5] - (w0 * n1 - w1 * n0)
+        vr0, vr1, vr2 = sphere_contact_velocity(n0, n1, n2, arm, cur[a, 3], cur[a, 4], cur[a, 5],
+                                                cur[a, 6], cur[a, 7], cur[a, 8])
         fn, fs1, fs2, fs3, slot_shear[a, k, 0], slot_shear[a, k, 1], slot_shear[a, k, 2] = spring_dashpot(
             n0, n1, n2, 1.0 - r, vr0, vr1, vr2, slot_shear[a, k, 0], slot_shear[a, k, 1], slot_shear[a, k, 2],
             h, update, kn, kt, damp_n, 0.0, mu)
         fx += fn * n0 + fs1
         fy += fn * n1 + fs2
         fz += fn * n2 + fs3
-        tx -= arm * (n1 * fs3 - n2 * fs2)
-        ty -= arm * (n2 * fs1 - n0 * fs3)
-        tz -= arm * (n0 * fs2 - n1 * fs1)
+        t0, t1, t2 = lever_torque(n0, n1, n2, arm, fs1, fs2, fs3)
+        tx -= t0
+        ty -= t1
+        tz -= t2
         if 1.0 - r > cs.bed_overlap_max[a]:
             cs.bed_overlap_max[a] = 1.0 - r
     ft = cs.ft

@@ -69,3 +69,20 @@ def spring_dashpot(n0, n1, n2, overlap, vr0, vr1, vr2, sh0, sh1, sh2, h, update,
             ft1 = 0.0
             ft2 = 0.0
     return fn, ft0, ft1, ft2, sh0, sh1, sh2
+
+
+@njit(cache=True, inline="always", error_model="numpy", _nrt=False)
+def sphere_contact_velocity(n0, n1, n2, arm, dv0, dv1, dv2, ws0, ws1, ws2):
+    """Relative velocity of the contact point of sphere i against sphere j (or a fixed
+    bed sphere): dv − arm (ω_i + ω_j) × n, with dv = v_i − v_j, ws = ω_i + ω_j, n from j
+    to i and the contact point ``arm`` from each centre."""
+    w0 = arm * ws0
+    w1 = arm * ws1
+    w2 = arm * ws2
+    return dv0 - (w1 * n2 - w2 * n1), dv1 - (w2 * n0 - w0 * n2), dv2 - (w0 * n1 - w1 * n0)
+
+
+@njit(cache=True, inline="always", error_model="numpy", _nrt=False)
+def lever_torque(n0, n1, n2, arm, f0, f1, f2):
+    """arm n × F: the torque on sphere i is minus this (contact point −arm n from its centre)."""
+    return arm * (n1 * f2 - n2 * f1), arm * (n2 * f0 - n0 * f2), arm * (n0 * f1 - n1 * f0)
