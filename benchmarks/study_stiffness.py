@@ -51,6 +51,8 @@ from pathlib import Path
 
 import numpy as np
 
+from saltation.io.writers import drain_jumps
+
 REPO = Path(__file__).resolve().parents[1]
 REDUCED = REPO / "cases" / "concentration_sweep_reduced.toml"
 TAU_RATIO = 1.79
@@ -73,19 +75,11 @@ def base_tables(shrink: float = 1.0) -> dict:
 
 
 def _collect(st, rows):
-    """Finished jumps (particle, jump, t_start, L, H, T) out of the kernels' buffers
-    (as io.writers.JumpWriter.collect, plus t_start)."""
-    nb = st.jump_buf_n
-    idx = np.nonzero(nb)[0]
-    if len(idx) == 0:
-        return
-    counts = nb[idx]
-    part = np.repeat(idx, counts)
-    data = np.concatenate([st.jump_buf[p, : nb[p]] for p in idx])
-    first = st.jump_count[idx] - counts
-    jidx = np.concatenate([np.arange(a, a + k) for a, k in zip(first, counts)])
-    rows.append(np.column_stack([part, jidx, data[:, 0], data[:, 1], data[:, 2], data[:, 3]]))
-    nb[idx] = 0
+    """Finished jumps (particle, jump, t_start, L, H, T) out of the kernels' buffers."""
+    drained = drain_jumps(st)
+    if drained is not None:
+        part, jidx, data = drained
+        rows.append(np.column_stack([part, jidx, data[:, 0], data[:, 1], data[:, 2], data[:, 3]]))
 
 
 def _approach_speeds(pos0, vel0, dcoll, dt, box):

@@ -231,21 +231,32 @@ class JumpWriter(ParquetTableWriter):
         """Move the finished jumps out of the kernels' per-grain buffers (st.jump_buf,
         jump_buf_n, jump_count of either grain family) into the file and into ``rows``
         (particle, jump, length, height, velocity, duration: the summary's statistics)."""
-        nb = st.jump_buf_n
-        idx = np.nonzero(nb)[0]
-        if len(idx) == 0:
+        drained = drain_jumps(st)
+        if drained is None:
             return
-        counts = nb[idx]
-        part = np.repeat(idx, counts)
-        data = np.concatenate([st.jump_buf[p, : nb[p]] for p in idx])
-        first = st.jump_count[idx] - counts  # index of the first buffered jump per grain
-        jidx = np.concatenate([np.arange(a, a + k) for a, k in zip(first, counts)])
+        part, jidx, data = drained
         length, height, duration = data[:, 1], data[:, 2], data[:, 3]
         velocity = length / duration  # duration ≥ one step (saltation.bed.jumps)
         self.append(particle=part.astype(np.int32), jump=jidx.astype(np.int32), t_start=data[:, 0], length=length,
                     height=height, duration=duration, velocity=velocity, discarded=jidx < DISCARDED_JUMPS)
         rows.append(np.column_stack([part, jidx, length, height, velocity, duration]))
-        nb[idx] = 0
+
+
+def drain_jumps(st):
+    """Empty the kernels' per-grain jump buffers (st.jump_buf, jump_buf_n, jump_count of
+    either grain family): (particle, jump index, records (M, 4): t_start, length, height,
+    duration), or None when no jump finished since the last call."""
+    nb = st.jump_buf_n
+    idx = np.nonzero(nb)[0]
+    if len(idx) == 0:
+        return None
+    counts = nb[idx]
+    part = np.repeat(idx, counts)
+    data = np.concatenate([st.jump_buf[p, : nb[p]] for p in idx])
+    first = st.jump_count[idx] - counts  # index of the first buffered jump per grain
+    jidx = np.concatenate([np.arange(a, a + k) for a, k in zip(first, counts)])
+    nb[idx] = 0
+    return part, jidx, data
 
 
 class ParaViewWriter:
