@@ -119,6 +119,8 @@ BED_COEFFICIENT_SETS = {
 _REQUIRED = "required"
 # particle.shape: the point-particle sphere, a natural mixture, or one Zingg class
 SHAPES = ("sphere", "mixture", "disk", "blade", "rod", "equant")
+# particle.construction: shapes.build's method (shapes.METHODS)
+CONSTRUCTIONS = ("seed", "fitted")
 
 
 class CaseError(ValueError):
@@ -312,10 +314,16 @@ class ParticleConfig(_Table):
                                doc='axis-ratio ranges per Zingg class, {class = [[Di/Dl lo, hi], '
                                    '[Ds/Di lo, hi]]}, uniform draws within the class; absent: '
                                    'shapes.DEFAULT_RATIOS')
+    construction: str | None = _key(kind="choice", choices=CONSTRUCTIONS,
+                                    doc='how each grain is built from its axes: "seed" (the seed '
+                                        'paper\'s spheres) or "fitted" (the same layout, sphere '
+                                        'sizes and spacings fitted per grain to the volume and '
+                                        'moments of inertia of the same-axes ellipsoid); absent: '
+                                        '"seed" (saltation.grains.shapes.build)')
 
     def _check(self):
         if self.shape == "sphere":
-            for k in ("fractions", "ratios"):
+            for k in ("fractions", "ratios", "construction"):
                 if getattr(self, k) is not None:
                     raise self._error(f'particle.{k} is given but particle.shape = "sphere": it '
                                       f'applies to bonded-sphere shapes only ("mixture", '
@@ -323,6 +331,11 @@ class ParticleConfig(_Table):
         if self.fractions is not None and self.shape != "mixture":
             raise self._error(f'particle.fractions applies to shape = "mixture" only, got '
                               f'shape = "{self.shape}" (a single class has fraction 1)', "fractions")
+
+    @property
+    def construction_method(self) -> str:
+        """shapes.build's method for the grains: particle.construction, "seed" if absent."""
+        return self.construction or "seed"
 
     @property
     def shape_fractions(self) -> dict[str, float]:

@@ -19,7 +19,8 @@ grain (the length scale d of the particle units). Axes are drawn by
 ``shapes.draw_axes(n, fractions, ratios, Dn=1)`` — classes with the case's fractions
 (Smith 2003 by default; one class for shape = "disk" | "blade" | "rod" | "equant"),
 axis ratios uniform in the class's range — from their own random stream (seed
-[run.seed, 6]), so the grains' start (positions, velocities, spins: grains/initial.py with
+[run.seed, 6]) and built with ``particle.construction`` ("seed" by default or "fitted":
+``shapes.build(..., method=...)``), so the grains' start (positions, velocities, spins: grains/initial.py with
 run.seed, identical to a sphere run's) does not depend on the shapes. Orientations are
 uniformly random (Shoemake 1992, stream [run.seed, 7]); a grain whose lowest point would
 start lower than the lowest sphere can (0.1 d above the bed top) is raised until it is
@@ -103,7 +104,8 @@ def draw_grains(case: Case, n: int):
     ratios = {k: (tuple(v[0]), tuple(v[1])) for k, v in (p.ratios or {}).items()}
     classes, axes = shapes.draw_axes(n, fractions=fractions, ratios=ratios or None, Dn=1.0,
                                      seed=[int(case.run.seed), 6])
-    return classes, axes, [shapes.build(*a) for a in axes]
+    method = p.construction_method
+    return classes, axes, [shapes.build(*a, method=method) for a in axes]
 
 
 class ClusterSimulation(Simulation):
@@ -357,6 +359,7 @@ class ClusterSimulation(Simulation):
             **self._summary_head(status, steps),
             "shape": {
                 "shape": c.particle.shape,
+                "construction": c.particle.construction_method,
                 "fractions": c.particle.shape_fractions,
                 "nominal_diameter_m": c.particle.diameter,
                 "grains_per_class": {k: int((self.class_id == i).sum()) for k, i in CLASS_IDS.items()},

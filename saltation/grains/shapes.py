@@ -1,5 +1,12 @@
 """Irregular grains as rigidly bonded spheres (SPEC §8, seed 000 §2.4 and appendix).
 
+Two constructions, ``build(Dl, Di, Ds, method=...)``:
+
+* ``"seed"`` (the default): the seed paper's (seed 000, §2.4 and appendix), below;
+* ``"fitted"``: the same layout per class, its spheres sized and placed per grain so
+  that the volume and the moments of inertia match the ellipsoid with the same axes
+  (*Fitted construction*, at the end of this text).
+
 A grain is described by its long, intermediate and short axes Dl ≥ Di ≥ Ds and built
 from as few component spheres as the paper allows, in the **geometric body frame**:
 x along the long axis, y along the intermediate axis, z along the short axis, origin at
@@ -41,19 +48,67 @@ Ds ≈ Di failing *and* the paper's text is ambiguous we follow the list above.
 
 Mass properties
 ---------------
-Component spheres built here touch but never overlap (checked), so volume, centre of
+Component spheres of the seed construction touch but never overlap (checked), so volume, centre of
 mass and inertia tensor are **exact** sums of sphere terms with the parallel-axis
 theorem (I_sphere = m d²/10). For user-given sphere sets (:meth:`Composite.from_spheres`)
 that overlap, the union is integrated on a voxel grid (midpoint rule, spacing
 h = min(d)/``VOXEL_PER_DIAMETER``); the relative error of the volume is ≲ 0.5 % at the
 default 48 voxels per smallest diameter (tests compare a two-sphere lens with the exact
-formula), and the mass properties are those of the union, not the sum.
+formula), and the mass properties are those of the union, not the sum. The fitted
+construction's spheres overlap; their centres share the plane z = 0, so the union is
+integrated exactly in z and on a fine grid in x, y instead (see below); ``exact`` is then
+False.
+
+Fitted construction
+-------------------
+The a priori test (benchmarks/shapes_apriori.py; seed 000 §3, 100 grains) finds the
+seed equants of sub-types 2–4 15–56 % lighter than the same-axes ellipsoid (mass ratio
+0.75–0.85, 0.63–0.71, 0.44–0.66), and moments off by up to a factor 2.5 (a rectangular lattice carries its mass further out than an
+ellipse; the rounding of [Dl/d] makes rows short or long). ``method="fitted"`` keeps the
+seed layout of the grain — the same number of spheres, the same pairs touching, all
+centres in the plane z = 0, the same mirror symmetries — and changes a few numbers p:
+
+* disk, blade, rod: centres (x_k, y_k) → (s_x x_k, s_y y_k) about the centre of the
+  layout, radii r_k → g r_k (1 − t e_k²), e_k² = (x_k/x_max)² + (y_k/y_max)² normalised to
+  max_k e_k² = 1 (t > 0 makes the outer spheres smaller, as the ellipsoid thins to its rim);
+  p = (s_x, s_y, g, t), without s_y for a rod (one row);
+* equant: the auxiliary spheres' centres scaled by (s_x, s_y) about the main sphere,
+  main radius × g_m, auxiliary radii × g_a; p = (s_x, s_y, g_m, g_a) (sub-type 2: no s_y;
+  sub-type 1 is one sphere of the ellipsoid's volume and stays as it is).
+
+p minimises the sum of squares of the relative errors against the ellipsoid of the same
+axes (m_e = ρ π Dl Di Ds/6, I_e,x = m_e (b² + c²)/5, …; :func:`ellipsoid_properties`)
+
+    F(p) = (V/V_e − 1)² + Σ_{j = x, y, z} (I_jj/I_e,j − 1)² + (I_xy/√(I_e,x I_e,y))²
+
+(I_xy only differs from 0 for equant sub-type 4, whose third auxiliary sphere breaks the
+mirror symmetry: the term keeps the body axes principal), subject to
+
+* every pair that touches in the seed layout overlaps or touches: |c_i − c_j| ≤ r_i + r_j
+  (the grain stays one connected body); radii ≥ 0.06 of the seed's (bounds on g, t);
+* the extent along each body axis E_j ≤ max((1 + τ) D_j, E_j^seed) — within the box
+  Dl × Di × Ds enlarged by τ, or no wider than the seed grain where that is already wider
+  (rods and equant sub-type 2, whose circular sections have diameter √(Di Ds) > Ds).
+
+τ is tried as 0, 0.1, 0.2, 0.3 in turn (``FIT_BOX_TOLS``; each fit starting from the
+previous one, the first from the seed layout) and the first fit reaching |V/V_e − 1| ≤ 5 %
+and every |I_jj/I_e,j − 1| ≤ 10 % (``FIT_GOAL``) is kept, else the one with the smallest F:
+a grain leaves its box only as far as the fixed number of spheres requires it (a disk of
+3 spheres of diameter Ds cannot hold the ellipsoid's volume inside the box). The
+minimiser is SLSQP (scipy) on ≤ 4 parameters; V and I of the overlapping union are
+integrated exactly in z and by the midpoint rule in x, y (:func:`_planar_properties`,
+``FIT_PER_RADIUS`` = 10 points per smallest radius in the fit, relative error ~2·10⁻³;
+``PLANAR_PER_RADIUS`` = 60 for the grain's mass properties, ~10⁻⁴ against the voxel
+integral). Nothing is fitted to anything but the grain's own ellipsoid. Fits are cached
+per axes (:func:`fit_record` tells what a fit did); 100 grains take ~6 s of CPU.
 
 Units: whatever length unit the axes are given in (m in the code base); volume in that
 unit³; ``inertia_tensor(density)`` in density·unit⁵ (kg m² for kg/m³ and m).
 """
 from __future__ import annotations
 
+import copy
+import functools
 import math
 from dataclasses import dataclass, field
 
@@ -75,6 +130,17 @@ DEFAULT_RATIOS = {
     "equant": ((ZINGG_THRESHOLD, 1.0), (ZINGG_THRESHOLD, 1.0)),
 }
 VOXEL_PER_DIAMETER = 48
+METHODS = ("seed", "fitted")  # construction of build(..., method=...)
+# fitted construction (module text): quadrature points per smallest radius in the fit and
+# for the final mass properties; weight of the constraint residuals
+FIT_PER_RADIUS = 10
+PLANAR_PER_RADIUS = 60
+FIT_PENALTY = 100.0
+# box tolerances tried in turn (continuation): the fitted grain's extent along each axis
+# is at most max((1 + τ) D, the seed grain's extent); the first τ whose fit reaches the
+# goal (|mass error| ≤ 5 %, each moment ≤ 10 %) is kept, else the best of them
+FIT_BOX_TOLS = (0.0, 0.1, 0.2, 0.3)
+FIT_GOAL = (0.05, 0.10)
 _TOUCH_TOL = 1e-9
 
 
@@ -335,15 +401,16 @@ def _equant(Dl, Di, Ds):
     return sub, np.array(c), np.array([0.5 * dm, da * 0.5, da * 0.5, da * 0.5])
 
 
-def build(Dl: float, Di: float, Ds: float) -> Composite:
-    """The bonded-sphere grain for axes Dl ≥ Di ≥ Ds > 0 (SPEC §9 entry point).
+def check_method(method) -> str:
+    """The construction name if it is one of METHODS, else ValueError naming them."""
+    if not isinstance(method, str) or method not in METHODS:
+        raise ValueError(f"unknown construction method {method!r}: allowed "
+                         f"{', '.join(repr(m) for m in METHODS)}")
+    return method
 
-    Returns a :class:`Composite` with ``.zingg_class``, ``.centres`` (n, 3) about the
-    centre of mass in the body frame (x long, y intermediate, z short), ``.radii``,
-    ``.volume`` and ``.inertia_tensor(density)``. Raises ValueError naming the value for
-    non-positive or unordered axes."""
-    _check_axes(Dl, Di, Ds)
-    Dl, Di, Ds = float(Dl), float(Di), float(Ds)
+
+def _seed_layout(Dl, Di, Ds):
+    """(class, equant sub-type, centres, radii) of the seed construction."""
     cls = zingg_class(Dl, Di, Ds)
     sub = 0
     if cls in ("disk", "blade"):
@@ -352,8 +419,206 @@ def build(Dl: float, Di: float, Ds: float) -> Composite:
         c, r = _rod(Dl, Di, Ds)
     else:
         sub, c, r = _equant(Dl, Di, Ds)
+    return cls, sub, c, r
+
+
+def build(Dl: float, Di: float, Ds: float, method: str = "seed") -> Composite:
+    """The bonded-sphere grain for axes Dl ≥ Di ≥ Ds > 0 (SPEC §9 entry point).
+
+    ``method``: "seed" (default) — the seed paper's construction (module text);
+    "fitted" — the same layout with sphere sizes and spacings fitted per grain to the
+    volume and moments of the same-axes ellipsoid (module text, *Fitted construction*).
+
+    Returns a :class:`Composite` with ``.zingg_class``, ``.centres`` (n, 3) about the
+    centre of mass in the body frame (x long, y intermediate, z short), ``.radii``,
+    ``.volume`` and ``.inertia_tensor(density)``. Raises ValueError naming the value for
+    non-positive or unordered axes or an unknown method."""
+    check_method(method)
+    _check_axes(Dl, Di, Ds)
+    Dl, Di, Ds = float(Dl), float(Di), float(Ds)
+    if method == "fitted":
+        return _fitted(Dl, Di, Ds)
+    cls, sub, c, r = _seed_layout(Dl, Di, Ds)
     comp = Composite.from_spheres(c, r, zingg=cls, subtype=sub, axes=(Dl, Di, Ds))
     return comp
+
+
+# --------------------------------------------------------------------- fitted construction
+def _planar_properties(centres, radii, per_radius=PLANAR_PER_RADIUS, n=None):
+    """Volume, centroid and inertia (per unit density) of the union of spheres whose
+    centres all lie in the plane z = 0: exact in z (the union's section at (x, y) is
+    |z| ≤ H = max_k √(r_k² − (x − x_k)² − (y − y_k)²)), midpoint rule in x and y with
+    spacing ≈ min(r)/per_radius, or ``n`` = (nx, ny) cells on the bounding rectangle.
+    H is continuous, so with a fixed ``n`` the result varies continuously with the
+    centres and radii (what the fit needs)."""
+    lo = (centres[:, :2] - radii[:, None]).min(axis=0)
+    hi = (centres[:, :2] + radii[:, None]).max(axis=0)
+    if n is None:
+        n = np.maximum(1, np.ceil((hi - lo) / (radii.min() / per_radius)).astype(int))
+    n = np.asarray(n)
+    step = (hi - lo) / n
+    x = lo[0] + step[0] * (np.arange(n[0]) + 0.5)
+    y = lo[1] + step[1] * (np.arange(n[1]) + 0.5)
+    h2 = np.full((n[0], n[1]), 0.0)
+    for c, a in zip(centres, radii):
+        # only the window of the grid under this sphere
+        i0, i1 = np.searchsorted(x, [c[0] - a, c[0] + a])
+        j0, j1 = np.searchsorted(y, [c[1] - a, c[1] + a])
+        if i1 <= i0 or j1 <= j0:
+            continue
+        w = a * a - (x[i0:i1, None] - c[0]) ** 2 - (y[None, j0:j1] - c[1]) ** 2
+        np.maximum(h2[i0:i1, j0:j1], w, out=h2[i0:i1, j0:j1])
+    hz = np.sqrt(h2)
+    da = step[0] * step[1]
+    col = 2.0 * hz * da  # column volumes
+    vol = float(col.sum())
+    cx = col.sum(axis=1)
+    cy = col.sum(axis=0)
+    mx, my = float(cx @ x), float(cy @ y)
+    sxx, syy = float(cx @ (x * x)), float(cy @ (y * y))
+    sxy = float(x @ col @ y)
+    szz = float((hz**3).sum() * da * 2.0 / 3.0)
+    com = np.array([mx / vol, my / vol, 0.0])
+    second = np.array([[sxx, sxy, 0.0], [sxy, syy, 0.0], [0.0, 0.0, szz]]) - vol * np.outer(com, com)
+    inertia = np.trace(second) * np.eye(3) - second
+    return vol, com, inertia
+
+
+def _touching_pairs(centres, radii):
+    n = len(radii)
+    return [(i, j) for i in range(n) for j in range(i + 1, n)
+            if np.linalg.norm(centres[i] - centres[j]) <= (radii[i] + radii[j]) * (1.0 + 1e-9)]
+
+
+def _fit_model(cls, c0, r0):
+    """Seed layout -> (names of the free parameters, their bounds, spheres(p)). The
+    layout (number of spheres, who touches whom, symmetry) is the seed's; p scales the
+    centre coordinates along x and y and the radii (module text)."""
+    if cls == "equant":
+        # main sphere at the origin, auxiliaries scaled about it; radii of the main
+        # sphere and of the auxiliaries scaled separately
+        ref = np.zeros(3)
+        groups = np.array([0] + [1] * (len(r0) - 1))
+        taper = np.zeros(len(r0))
+    else:
+        ref = 0.5 * (c0.min(axis=0) + c0.max(axis=0))
+        groups = np.zeros(len(r0), dtype=int)
+        rel = c0 - ref
+        span = np.abs(rel).max(axis=0)
+        e2 = sum((rel[:, k] / span[k]) ** 2 for k in (0, 1) if span[k] > 0)
+        taper = e2 / e2.max() if e2.max() > 0 else np.zeros(len(r0))
+    rel = c0 - ref
+    names, lo, hi = [], [], []
+    if np.ptp(rel[:, 0]) > 0:
+        names.append("sx"); lo.append(0.2); hi.append(3.0)
+    if np.ptp(rel[:, 1]) > 0:
+        names.append("sy"); lo.append(0.2); hi.append(3.0)
+    for g in sorted(set(groups.tolist())):
+        names.append(f"g{g}"); lo.append(0.2); hi.append(5.0)
+    if np.ptp(taper) > 0:
+        names.append("t"); lo.append(0.0); hi.append(0.7)
+
+    def spheres(p):
+        v = dict(zip(names, p))
+        c = rel * np.array([v.get("sx", 1.0), v.get("sy", 1.0), 1.0])
+        g = np.array([v[f"g{k}"] for k in groups])
+        r = r0 * g * (1.0 - v.get("t", 0.0) * taper)
+        return c, r
+
+    return names, (np.array(lo), np.array(hi)), spheres
+
+
+def _extent(c, r):
+    return (c + r[:, None]).max(axis=0) - (c - r[:, None]).min(axis=0)
+
+
+@functools.lru_cache(maxsize=4096)
+def _fitted_spheres(Dl, Di, Ds):
+    """(class, sub-type, centres, radii, fit record) of the fitted construction (cached
+    per axes; the arrays are copied by the caller)."""
+    from scipy.optimize import minimize
+
+    cls, sub, c0, r0 = _seed_layout(Dl, Di, Ds)
+    names, bounds, spheres = _fit_model(cls, c0, r0)
+    p0 = np.ones(len(names))
+    if "t" in names:
+        p0[names.index("t")] = 0.0
+    m_e, i_e = ellipsoid_properties(Dl, Di, Ds)
+    axes = np.array([Dl, Di, Ds])
+    limit = _extent(c0, r0)  # set per box tolerance below
+    bonds = _touching_pairs(c0, r0)
+    bi = np.array([b[0] for b in bonds], dtype=int)
+    bj = np.array([b[1] for b in bonds], dtype=int)
+    scale_ij = math.sqrt(i_e[0] * i_e[1])
+
+    grid = np.maximum(1, np.ceil(_extent(c0, r0)[:2] / (r0.min() / FIT_PER_RADIUS)).astype(int))
+
+    def errors(c, r):
+        """relative errors of volume and Ixx, Iyy, Izz; Ixy over √(Ix Iy) of the ellipsoid"""
+        vol, _, inertia = _planar_properties(c, r, n=grid)
+        return np.array([vol / m_e - 1.0, *(np.diag(inertia) / i_e - 1.0), inertia[0, 1] / scale_ij])
+
+    def objective(p):
+        return float((errors(*spheres(p)) ** 2).sum())
+
+    def slack(p):  # ≥ 0: inside the limits, bonded pairs overlapping or touching
+        c, r = spheres(p)
+        out = [1.0 - _extent(c, r) / limit]
+        if len(bonds):
+            out.append(1.0 - np.linalg.norm(c[bi] - c[bj], axis=1) / (r[bi] + r[bj]))
+        return np.concatenate(out)
+
+    record = dict(parameters=names, seed_errors=errors(c0, r0).tolist())
+    if not names or len(r0) == 1:  # one sphere (equant sub-type 1): kept, its volume is exact
+        record.update(parameters=[], values=[], box_tol=0.0, errors=record["seed_errors"], success=True)
+        return cls, sub, c0, r0, record
+    best = None
+    p = p0
+    for tol in FIT_BOX_TOLS:
+        limit[:] = np.maximum(axes * (1.0 + tol), _extent(c0, r0))
+        sol = minimize(objective, p, method="SLSQP", bounds=list(zip(*bounds)),
+                       constraints=[dict(type="ineq", fun=slack)],
+                       options=dict(maxiter=200, ftol=1e-10, eps=1e-7))
+        p = sol.x
+        # hard feasibility: close what the solver's tolerance left apart or outside
+        c, r = spheres(p)
+        if len(bonds):
+            gap = (np.linalg.norm(c[bi] - c[bj], axis=1) / (r[bi] + r[bj])).max()
+            if gap > 1.0:
+                c = c / gap
+        over = (_extent(c, r) / limit).max()
+        if over > 1.0:
+            c, r = c / over, r / over
+        err = errors(c, r)
+        cost = float((err**2).sum())
+        if best is None or cost < best[0]:
+            best = (cost, c, r, dict(values=p.tolist(), box_tol=tol, errors=err.tolist(),
+                                     success=bool(sol.success)))
+        if abs(err[0]) <= FIT_GOAL[0] and np.abs(err[1:4]).max() <= FIT_GOAL[1]:
+            break
+    _, c, r, rec = best
+    record.update(rec)
+    return cls, sub, c, r, record
+
+
+def fit_record(Dl: float, Di: float, Ds: float) -> dict:
+    """What the fitted construction did for these axes: the free ``parameters`` and
+    their ``values`` (scale factors, see the module text), the box tolerance ``box_tol``
+    τ it settled on, the relative ``errors`` (volume, Ixx, Iyy, Izz, Ixy/√(Ix Iy)) against
+    the ellipsoid at the fit's quadrature, the ``seed_errors`` of the seed layout and the
+    solver's ``success``."""
+    _check_axes(Dl, Di, Ds)
+    return copy.deepcopy(_fitted_spheres(float(Dl), float(Di), float(Ds))[4])
+
+
+def _fitted(Dl, Di, Ds) -> Composite:
+    cls, sub, c, r, _ = _fitted_spheres(Dl, Di, Ds)
+    c = np.array(c, dtype=np.float64)
+    r = np.array(r, dtype=np.float64)
+    if not _overlapping(c, r):
+        return Composite.from_spheres(c, r, zingg=cls, subtype=sub, axes=(Dl, Di, Ds))
+    vol, com, inertia = _planar_properties(c, r)
+    return Composite(cls, sub, (Dl, Di, Ds), c - com, r, vol, inertia, False)
 
 
 # --------------------------------------------------------------------- reference shapes
@@ -450,7 +715,9 @@ def draw_axes(n, *, fractions=None, ratios=None, Dl_range=None, Dn=None, seed=0)
     return [str(c) for c in cls], axes
 
 
-def mixture(n, *, fractions=None, ratios=None, Dl_range=None, Dn=None, seed=0):
-    """n composites of a natural mixture (see :func:`draw_axes`)."""
+def mixture(n, *, fractions=None, ratios=None, Dl_range=None, Dn=None, seed=0, method="seed"):
+    """n composites of a natural mixture (see :func:`draw_axes`), built with ``method``
+    ("seed" | "fitted", see :func:`build`)."""
+    check_method(method)
     _, axes = draw_axes(n, fractions=fractions, ratios=ratios, Dl_range=Dl_range, Dn=Dn, seed=seed)
-    return [build(*a) for a in axes]
+    return [build(*a, method=method) for a in axes]
