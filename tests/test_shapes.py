@@ -243,7 +243,7 @@ def test_method_values_and_default():
 def test_case_key_particle_construction():
     """particle.construction = "seed" | "fitted" (absent: "seed") chooses shapes.build's
     method for the run's grains (engine/composites.draw_grains)."""
-    from saltation.case.schema import CaseError, load_case, loads_case, dump_toml
+    from saltation.case.schema import CaseError, dump_toml, load_case, loads_case
     from saltation.engine.composites import draw_grains
 
     case = {"particle": {"diameter": 0.69e-3, "shape": "mixture"}, "flow": {"source": "les", "tau_ratio": 1.79},

@@ -508,15 +508,18 @@ def _fit_model(cls, c0, r0):
         e2 = sum((rel[:, k] / span[k]) ** 2 for k in (0, 1) if span[k] > 0)
         taper = e2 / e2.max() if e2.max() > 0 else np.zeros(len(r0))
     rel = c0 - ref
-    names, lo, hi = [], [], []
+    bounds = []  # (parameter, lower, upper)
     if np.ptp(rel[:, 0]) > 0:
-        names.append("sx"); lo.append(0.2); hi.append(3.0)
+        bounds.append(("sx", 0.2, 3.0))
     if np.ptp(rel[:, 1]) > 0:
-        names.append("sy"); lo.append(0.2); hi.append(3.0)
+        bounds.append(("sy", 0.2, 3.0))
     for g in sorted(set(groups.tolist())):
-        names.append(f"g{g}"); lo.append(0.2); hi.append(5.0)
+        bounds.append((f"g{g}", 0.2, 5.0))
     if np.ptp(taper) > 0:
-        names.append("t"); lo.append(0.0); hi.append(0.7)
+        bounds.append(("t", 0.0, 0.7))
+    names = [b[0] for b in bounds]
+    lo = [b[1] for b in bounds]
+    hi = [b[2] for b in bounds]
 
     def spheres(p):
         v = dict(zip(names, p))
