@@ -1,0 +1,635 @@
+"""Cost of the dense cases: the reduced concentration sweep after spin-up, its split, and
+the contact part against LAMMPS; the full 24-case sweep's wall time estimated from it
+(issue 19, item 4).
+
+    python benchmarks/bench_dense.py [--concentrations 0.52 2.07 3.94] [--tau-ratio 1.79]
+        [--spinup 1.0] [--spinup-threads 1] [--steps 200] [--threads 1 2] [--no-lammps]
+        [--lammps-concentrations 3.94] [--lammps-segment 10] [--lammps-skin 0.3]
+        [--lmp lmp] [--keep DIR] [--cases cases/concentration_sweep_reduced.toml]
+        [--sweep cases/concentration_sweep.toml] [--json OUT]
+
+Cases: ``cases/concentration_sweep_reduced.toml`` (the paper's physics on the paper's
+domain / 6 in x and z, so 1/36 of its grains at its concentration; soft contacts, virtual
+bed, shipped LES, dt = 0.02 d/u*) at the given concentrations (%, default the eight
+0.04 … 3.94) and one τ*/τ*c (default 1.79), seed 1 (``--cases`` takes them from another
+sweep file: the full sweep checks the domain-size assumption below). Each concentration
+runs in its own process:
+
+1. compile on a small case (excluded), build the reduced case, spin up ``--spinup``
+   simulated seconds (default 1.0 s: the near-bed dense layer forms over ~1 s; not
+   timed for the table, on ``--spinup-threads``, default 1; its cost per grain-step and
+   the share of grains below 2 d are traced chunk by chunk, ``spinup_trace``);
+2. keep the state (grains, fluid workspace, contact list and history, bed contacts,
+   counters: the arrays a checkpoint keeps, engine/stepping.Stepper.state_arrays) and,
+   for each thread count, restore it and time ``--steps`` hydrodynamic steps
+   (stepping.Stepper.advance in one call per chunk; its timers give the free flight /
+   contacts / bed split; wall and process CPU time). Every thread count starts from the
+   same state; their end states are compared (``same_end_state``: the split and its
+   contacts are race-free, so they should agree bit for bit);
+3. restore it once more and step one step at a time (not timed, ``--spinup-threads``)
+   to count the grains the contact phase sub-stepped in each step (``ph.active``),
+   keeping the state every ``--lammps-segment`` steps for 4.: the **engaged fraction** =
+   sub-stepped grain-steps / (N · steps). The counter ``SUBSTEPPED`` (grain-sub-steps
+   done) over N · n_sub · steps is the **sub-step share** (a grain joins at the sub-step
+   before it can first touch, so share ≤ engaged fraction);
+4. (``--lammps-concentrations``, default 3.94 %) the contact part alone in LAMMPS, run
+   right after in the same process (same machine load), in segments: our state at the
+   start of every ``--lammps-segment`` (default 10) steps of the timed window, each
+   written as a LAMMPS data file (particle units: d = 1, m = 1, x and z wrapped into the
+   periodic box) and run for n_sub × segment steps, so that the segments together span
+   the sub-steps of our timed contact phase (n_sub × steps) on the same configurations.
+   Each segment: ``pair_style gran/hooke/history`` with the run's k_n, k_t, γ_n, γ_t = 0,
+   f (contacts.pairs.contact_model_from_case), a ``fix wall/gran hooke/history`` plane at
+   y = 0 (y is the centre height above the bed top: a grain touches the bed below
+   y = 0.5 in both codes) with the bed's k_n, k_t, γ_n (from the bed restitution for
+   m_eff = m, as contacts.phase.make_bed_context) and the bed friction, ``fix gravity``
+   the submerged weight per unit mass (α/τ*, physics.forces.weight_components), no fluid,
+   ``fix nve/sphere``, time step h = dt/n_sub, ``neighbor SKIN bin`` checked every step,
+   one rank, OMP_NUM_THREADS=1 (one ``lmp`` process, the segments after ``clear``; their
+   "Loop time"s summed, set-up and file reading excluded). Touching grain pairs and
+   grains touching the bed are counted in our states (``_touching``) and by LAMMPS
+   (``compute contact/atom``, y < 0.5) at each segment's first and last step.
+
+Ratios (``ours / LAMMPS``, both wall time, ours on one thread; < 1: ours is cheaper):
+
+- ``per_engaged``: our contact-phase time per grain-sub-step actually done
+  (``SUBSTEPPED``) against LAMMPS's loop time per atom-step. LAMMPS moves every atom
+  every step; ours sub-steps only the engaged grains, and its phase time also carries
+  its per-step O(N) passes (reach, list upkeep, engagement test, gather/scatter, blocks);
+- ``per_grain``: our contact-phase time per (grain × sub-step) of *all* grains, i.e. the
+  cost of resolving the contacts of the whole suspension for one step, against the same
+  LAMMPS figure (LAMMPS would have to step all of them: this is the ratio of the two
+  codes' cost for the same physical time and the same grains).
+
+LAMMPS is not a like-for-like run of the physics: without the fluid the saltating grains
+fall, so its contacts drift away from ours within a segment (one run over the whole
+window, 4 d/u* at 200 steps, piled them into a packed layer with ~40 times the touching
+pairs: hence the segments); the counts at each segment's first and last step say how
+much. Its tangential springs start from zero in each segment (ours carry theirs); our
+lever arm is r/2 (LAMMPS d/2); its neighbour list is half (each pair once), ours full.
+
+Full-sweep estimate: the paper's sweep (``--sweep``, default cases/concentration_sweep
+.toml: 8 concentrations × τ*/τ*c 1.79, 2.43, 2.67, the paper's domain = 36 × the reduced
+grains, 200 s each) costs Σ N · n_steps / (grain-steps/s at that concentration, one
+thread) core-seconds; with 2 workers × 1 thread on this 2-core machine the wall time is
+that sum / 2 (and at least the longest case; the greedy longest-first schedule is
+printed too). Assumptions: the cost per grain-step at a concentration does not depend
+on the domain size (the phases are linear in N: benchmarks/bench_scaling.py) nor on
+τ*/τ*c (measured at ``--tau-ratio`` only), the measured state (after the spin-up) is
+representative of the 200 s, each worker has a core to itself (this machine is shared:
+the load average at each measurement is printed; a busier machine is slower; repeated
+runs of the same deterministic state differed by up to ~35 % in grain-steps/s), only the
+stepping is counted (not a run's outputs: jumps, displacement variances, checkpoints),
+and concentrations not measured are interpolated linearly in C (marked).
+
+Prints a table and the estimate; ``--json`` writes everything.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import re
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+REDUCED = ROOT / "cases" / "concentration_sweep_reduced.toml"
+FULL = ROOT / "cases" / "concentration_sweep.toml"
+PAPER_C = (0.04, 0.12, 0.18, 0.26, 0.52, 1.03, 2.07, 3.94)  # %
+WORKERS = 2
+
+
+# --------------------------------------------------------------------------- one concentration
+
+
+def _sweep_case(path, concentration_pct, tau_ratio):
+    """(tables, overrides) of the sweep case at that concentration (%) and τ*/τ*c, seed 1."""
+    from saltation.studies.sweep import load_sweep
+
+    sw = load_sweep(path)
+    for c in sw.cases:
+        v = c.values
+        if (abs(100.0 * v["run.concentration"] - concentration_pct) < 1e-9
+                and abs(v["flow.tau_ratio"] - tau_ratio) < 1e-9):
+            return c.tables, dict(v)
+    raise SystemExit(f"{path}: no case at C = {concentration_pct} %, tau_ratio = {tau_ratio} "
+                     f"(concentrations {sorted({100 * c.values['run.concentration'] for c in sw.cases})})")
+
+
+def _copy_tuple(t):
+    return type(t)(*[a.copy() for a in t])
+
+
+def _touching(pos, lx, lz):
+    """(grain pairs closer than d, grains with y < 1/2) at pos (N, 3), x and z periodic."""
+    import numpy as np
+
+    p = pos.copy()
+    p[:, 0] %= lx
+    p[:, 2] %= lz
+    pairs = 0
+    for i0 in range(0, len(p), 512):
+        a = p[i0:i0 + 512, None, :] - p[None, :, :]
+        a[..., 0] -= lx * np.round(a[..., 0] / lx)
+        a[..., 2] -= lz * np.round(a[..., 2] / lz)
+        r2 = (a * a).sum(-1)
+        idx = np.arange(i0, min(i0 + 512, len(p)))
+        r2[np.arange(len(idx)), idx] = np.inf
+        pairs += int((r2 < 1.0).sum())
+    return pairs // 2, int((pos[:, 1] < 0.5).sum())
+
+
+def _write_lammps_data(path, pos, vel, spin, lx, lz, ytop):
+    """atom_style sphere data file: d = 1, density 6/π (m = 1), x and z wrapped."""
+    lines = ["saltation dense layer (benchmarks/bench_dense.py)", "", f"{len(pos)} atoms", "1 atom types", "",
+             f"0 {float(lx)!r} xlo xhi", f"-0.5 {float(ytop)!r} ylo yhi", f"0 {float(lz)!r} zlo zhi", "",
+             "Atoms # sphere", ""]
+    for i, p in enumerate(pos):
+        x, y, z = float(p[0]) % lx, float(p[1]), float(p[2]) % lz
+        lines.append(f"{i + 1} 1 1.0 {6.0 / math.pi!r} {x!r} {y!r} {z!r}")
+    lines += ["", "Velocities", ""]
+    lines += [f"{i + 1} " + " ".join(repr(float(x)) for x in (*v, *w)) for i, (v, w) in enumerate(zip(vel, spin))]
+    Path(path).write_text("\n".join(lines) + "\n")
+
+
+def _lammps_segment(data, model, bed_gamma, bed_friction, g, h, n_steps, skin):
+    """One LAMMPS segment: read ``data``, run n_steps of h (the input is a chain of these,
+    each after ``clear``)."""
+    gx, gy = g  # a = (gx, -gy, 0)
+    mag = math.hypot(gx, gy)
+    return f"""clear
+units lj
+atom_style sphere
+atom_modify map array
+boundary p fm p
+comm_modify vel yes
+read_data {data}
+set group all mass 1.0
+pair_style gran/hooke/history {model.kn!r} {model.kt!r} {model.gamma_n!r} 0.0 {model.friction!r} 0
+pair_coeff * *
+neighbor {skin!r} bin
+neigh_modify delay 0 every 1 check yes
+fix integrate all nve/sphere
+fix weight all gravity {mag!r} vector {gx / mag!r} {-gy / mag!r} 0.0
+fix bed all wall/gran hooke/history {model.kn!r} {model.kt!r} {bed_gamma!r} 0.0 {bed_friction!r} 0 yplane 0.0 NULL
+timestep {h!r}
+compute nc all contact/atom
+compute npairs all reduce sum c_nc
+variable inbed atom "y < 0.5"
+compute nbed all reduce sum v_inbed
+thermo_style custom step atoms c_npairs c_nbed ke
+thermo_modify norm no
+thermo {n_steps}
+run {n_steps}
+"""
+
+
+def _run_lammps(lmp, work, sim, states, h, n_steps, skin):
+    """LAMMPS from each of our ``states`` (pos, vel, spin) for n_steps steps of h: one
+    input, one process, the segments one after the other; the loop times are summed."""
+    from saltation.physics.forces import weight_components
+
+    stp = sim.stepper
+    lx, _, lz = stp.box
+    bp = stp.bc.params  # packed, e, f, tilt, γ_n (m_eff = m), k_n, k_t, …
+    g = weight_components(sim.coef)
+    text = []
+    for k, (pos, vel, spin) in enumerate(states):
+        ytop = max(float(pos[:, 1].max()) + 20.0, 10.0)
+        _write_lammps_data(work / f"data.{k}", pos, vel, spin, lx, lz, ytop)
+        text.append(_lammps_segment(f"data.{k}", stp.model, float(bp[4]), float(bp[2]), g, h, n_steps, skin))
+    (work / "in.dense").write_text("\n".join(text))
+    env = {**os.environ, "OMP_NUM_THREADS": "1"}
+    load = os.getloadavg()[0]
+    t0 = time.perf_counter()
+    subprocess.run([lmp, "-in", "in.dense", "-log", "log.dense", "-screen", "none"], cwd=work, check=True, env=env)
+    wall = time.perf_counter() - t0
+    log = (work / "log.dense").read_text()
+    loops = [float(x) for x in re.findall(r"Loop time of ([0-9.eE+-]+) on 1 procs", log)]
+    sections = {}
+    for m in re.finditer(r"^(Pair|Neigh|Comm|Output|Modify|Other)\s*\|\s*([0-9.eE+-]+)", log, re.M):
+        sections[m.group(1).lower()] = sections.get(m.group(1).lower(), 0.0) + float(m.group(2))
+    firsts, lasts = [], []  # thermo rows (step, atoms, contact/atom sum, bed contacts, ke) of each segment
+    for head in re.finditer(r"^\s*Step\s+Atoms\s+c_npairs\s+c_nbed\s+KinEng\s*$", log, re.M):
+        rows = []
+        for line in log[head.end():].lstrip("\n").splitlines():
+            parts = line.split()
+            try:
+                row = [float(x) for x in parts]
+            except ValueError:
+                break
+            if len(row) != 5:
+                break
+            rows.append(row)
+        if rows:
+            firsts.append(rows[0])
+            lasts.append(rows[-1])
+    cpu = [float(x) for x in re.findall(r"([0-9.]+)% CPU use", log)]
+    n = len(states[0][0])
+    total = n_steps * len(states)
+    loop = sum(loops)
+    mean = lambda xs: sum(xs) / len(xs) if xs else None  # noqa: E731
+    out = {
+        "version": re.search(r"LAMMPS \(([^)]*)\)", log).group(1),
+        "atoms": n, "segments": len(states), "steps_per_segment": n_steps, "steps": total, "timestep": h,
+        "skin": skin, "loop_s": loop, "loop_s_per_segment": loops, "wall_s": wall, "sections_s": sections,
+        "neighbor_builds": sum(int(x) for x in re.findall(r"Neighbor list builds = (\d+)", log)),
+        "cpu_use_percent": mean(cpu), "ns_per_atom_step": 1e9 * loop / (n * total), "load_avg_1min": load,
+        # contact/atom counts each pair from both grains
+        "touching_pairs_first": mean([r[2] / 2.0 for r in firsts]),
+        "touching_pairs_last": mean([r[2] / 2.0 for r in lasts]),
+        "bed_contacts_first": mean([r[3] for r in firsts]), "bed_contacts_last": mean([r[3] for r in lasts]),
+        "atoms_last": int(min(r[1] for r in lasts)) if lasts else None,
+    }
+    return out
+
+
+def one_concentration(args) -> dict:
+    """Runs in a child process (main): the measurements at one concentration."""
+    import numba
+    import numpy as np
+
+    from saltation.case.schema import load_case, resolve_domain
+    from saltation.contacts.phase import SUBSTEPPED
+    from saltation.engine.simulation import Simulation, _les_box_m, open_flow
+    from saltation.flight.spheres import make_workspace
+
+    most = numba.config.NUMBA_NUM_THREADS
+    threads = [t for t in args.threads if t <= most]
+    say = lambda *a: print(f"[C = {args.one} %]", *a, file=sys.stderr, flush=True)  # noqa: E731
+
+    def build(tables, overrides=None):
+        case = load_case(tables, overrides)
+        ds = open_flow(case)
+        case = resolve_domain(case, _les_box_m(ds, case))
+        sim = Simulation(case, ds, "/tmp/bench_dense_unused", progress=False)
+        st = sim._initial_state()
+        ws = make_workspace(sim.n)
+        sim.stepper.start(st.pos)
+        return sim, ds, st, ws
+
+    def steps(sim, f, st, ws, step0, n):
+        done = 0
+        while done < n:
+            k = sim.stepper.advance(f, st, ws, (step0 + done) * sim.dt, n - done, step0 + done)
+            st.jump_buf_n[:] = 0  # jumps are not collected here
+            done += k
+        return done
+
+    # compile (cached after the first run) on a small case
+    t0 = time.perf_counter()
+    warm = {"particle": {"diameter": 0.69e-3, "density": 2650.0}, "fluid": {"density": 1000.0, "viscosity": 1e-6},
+            "flow": {"source": "les", "tau_ratio": 1.79}, "bed": {"model": "virtual"}, "collisions": {"model": "soft"},
+            "run": {"n_particles": 300, "duration": 1.0, "dt_particle": 0.02, "seed": 7,
+                    "domain": [0.03, 0.015, 0.005]}, "output": {"tracks": False, "vtk": False}}
+    sim, ds, st, ws = build(warm)
+    numba.set_num_threads(max(threads))
+    steps(sim, ds.arrays, st, ws, 0, 3)
+    compile_s = time.perf_counter() - t0
+
+    tables, values = _sweep_case(args.cases, args.one, args.tau_ratio)
+    sim, ds, st, ws = build(tables, values)
+    c, stp, f = sim.case, sim.stepper, ds.arrays
+    n, n_sub = sim.n, stp.n_sub
+    seconds_per_step = c.dt
+    spin_steps = int(round(args.spinup / seconds_per_step))
+    numba.set_num_threads(min(args.spinup_threads, most))
+    say(f"N = {n}, n_sub = {n_sub}, spin-up {args.spinup} s = {spin_steps} steps on "
+        f"{numba.get_num_threads()} thread(s)")
+    t0 = time.perf_counter()
+    done = 0
+    chunk = max(1, spin_steps // 10)
+    trace = []  # per spin-up chunk: has the layer (and the cost per grain-step) settled?
+    while done < spin_steps:
+        k, c0 = min(chunk, spin_steps - done), time.perf_counter()
+        done += steps(sim, f, st, ws, done, k)
+        el = time.perf_counter() - c0
+        trace.append({"t_s": done * seconds_per_step, "grain_steps_per_s": n * k / el,
+                      "mean_height_d": float(st.pos[:, 1].mean()), "share_below_2d": float((st.pos[:, 1] < 2.0).mean()),
+                      "load_avg_1min": os.getloadavg()[0]})
+        say(f"spin-up {done}/{spin_steps} steps, {time.perf_counter() - t0:.0f} s, {n * k / el:.3g} grain-steps/s, "
+            f"{100 * trace[-1]['share_below_2d']:.0f} % below 2 d, load {trace[-1]['load_avg_1min']:.2f}")
+    spinup_wall = time.perf_counter() - t0
+
+    # the state after spin-up, restored before every measurement
+    keep_st, keep_ws = _copy_tuple(st), _copy_tuple(ws)
+    keep_arrays = {k: np.array(v, copy=True) for k, v in stp.state_arrays().items()}
+
+    def restore():
+        s, w = _copy_tuple(keep_st), _copy_tuple(keep_ws)
+        stp.start(s.pos)
+        stp.load_state_arrays({k: v.copy() for k, v in keep_arrays.items()}, s.pos)
+        return s, w
+
+    lx, _, lz = stp.box
+    pairs0, bed0 = _touching(keep_st.pos, lx, lz)
+    out = {
+        "concentration_pct": 100.0 * c.concentration, "tau_ratio": c.tau_ratio, "n": n, "substeps_per_step": n_sub,
+        "dt_particle": sim.dt, "substep_particle": sim.dt / n_sub, "domain_d": [round(lx, 2), round(lz, 2)],
+        "spinup_s_simulated": spin_steps * seconds_per_step, "spinup_steps": spin_steps,
+        "spinup_wall_s": spinup_wall, "spinup_threads": min(args.spinup_threads, most), "spinup_trace": trace,
+        "compile_and_warmup_s": compile_s, "threading_layer": numba.threading_layer(),
+        "steps": args.steps, "touching_pairs_start": pairs0, "bed_contacts_start": bed0,
+        "mean_height_start_d": float(keep_st.pos[:, 1].mean()),
+        "share_below_2d_start": float((keep_st.pos[:, 1] < 2.0).mean()),
+        "kn": stp.model.kn, "kt": stp.model.kt, "gamma_n": stp.model.gamma_n, "friction": stp.model.friction,
+        "bed_gamma_n": float(stp.bc.params[4]), "bed_friction": float(stp.bc.params[2]),
+        "runs": {},
+    }
+    ends = {}
+    for th in threads:
+        numba.set_num_threads(th)
+        s, w = restore()
+        stp.timers[:] = 0.0
+        cnt0 = stp.ph.counters.copy()
+        load = os.getloadavg()[0]
+        c0, t0 = time.process_time(), time.perf_counter()
+        k = steps(sim, f, s, w, spin_steps, args.steps)
+        wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+        ff, pc, bd = (float(x) for x in stp.timers)
+        dc = stp.ph.counters - cnt0
+        gs = n * k
+        sub = int(dc[SUBSTEPPED])
+        out["runs"][str(th)] = {
+            "threads": th, "steps": k, "wall_s": wall, "cpu_s": cpu, "cpu_per_wall": cpu / wall,
+            "grain_steps_per_s": gs / wall, "us_per_grain_step": 1e6 * wall / gs,
+            "free_flight_us": 1e6 * ff / gs, "contacts_us": 1e6 * pc / gs, "bed_us": 1e6 * bd / gs,
+            "other_us": 1e6 * (wall - ff - pc - bd) / gs,
+            "contacts_s": pc, "substeps_done": sub, "substep_share": sub / (gs * n_sub),
+            "contacts_ns_per_substep_done": 1e9 * pc / sub if sub else None,
+            "contacts_ns_per_grain_substep": 1e9 * pc / (gs * n_sub),
+            "list_rebuilds": int(dc[0]), "overruns": int(dc[1]), "wakes": int(dc[2]), "missed": int(dc[4]),
+            "blocks_per_step": float(dc[5]) / k, "redone": int(dc[6] + dc[7]),
+            "load_avg_1min": load,
+        }
+        ends[th] = (s.pos.copy(), s.vel.copy())
+        say(f"{th} thread(s): {gs / wall:.4g} grain-steps/s, load {load:.2f}")
+    if len(ends) > 1:
+        ref = ends[threads[0]]
+        out["same_end_state"] = all(np.array_equal(ref[0], e[0]) and np.array_equal(ref[1], e[1])
+                                    for e in ends.values())
+    end_pos = ends[threads[0]][0]
+    out["touching_pairs_end"], out["bed_contacts_end"] = _touching(end_pos, lx, lz)
+
+    # engaged grains per step (untimed, one step at a time)
+    numba.set_num_threads(min(args.spinup_threads, most))
+    s, w = restore()
+    engaged = 0
+    seg = max(1, min(args.lammps_segment, args.steps))
+    states, pairs_at = [], []  # our state at the start of each LAMMPS segment
+    for j in range(args.steps):
+        if j % seg == 0 and j + seg <= args.steps:
+            states.append((s.pos.copy(), s.vel.copy(), s.spin.copy()))
+            pairs_at.append(_touching(s.pos, lx, lz) if args.lammps_on else (0, 0))
+        steps(sim, f, s, w, spin_steps + j, 1)
+        engaged += int(stp.ph.active.sum())
+    out["engaged_fraction"] = engaged / (n * args.steps)
+
+    if args.lammps_on:
+        lmp = shutil.which(args.lmp)
+        if lmp is None:
+            out["lammps"] = {"error": f"{args.lmp} not found"}
+        else:
+            work = Path(args.keep) / f"c{args.one:g}" if args.keep else Path(tempfile.mkdtemp(prefix="bench_dense_"))
+            work.mkdir(parents=True, exist_ok=True)
+            say(f"LAMMPS: {n} atoms, {len(states)} segments of {n_sub * seg} steps in {work}")
+            try:
+                lam = _run_lammps(lmp, work, sim, states, sim.dt / n_sub, n_sub * seg, args.lammps_skin)
+                lam["ours_touching_pairs_at_segment_starts"] = sum(p for p, _ in pairs_at) / len(pairs_at)
+                lam["ours_bed_contacts_at_segment_starts"] = sum(b for _, b in pairs_at) / len(pairs_at)
+            except (subprocess.CalledProcessError, AttributeError) as err:
+                lam = {"error": f"{type(err).__name__}: {err}", "log_tail": (work / "log.dense").read_text()[-2000:]
+                       if (work / "log.dense").exists() else ""}
+            out["lammps"] = lam
+            if "loop_s" in lam and "1" in out["runs"]:
+                r1 = out["runs"]["1"]
+                if r1["contacts_ns_per_substep_done"]:
+                    lam["ratio_per_engaged"] = r1["contacts_ns_per_substep_done"] / lam["ns_per_atom_step"]
+                lam["ratio_per_grain"] = r1["contacts_ns_per_grain_substep"] / lam["ns_per_atom_step"]
+            if not args.keep:
+                shutil.rmtree(work, ignore_errors=True)
+            say(f"LAMMPS done: {lam.get('ns_per_atom_step', float('nan')):.4g} ns per atom-step")
+    return out
+
+
+# --------------------------------------------------------------------------- the driver
+
+
+def run_one(c_pct, args) -> dict:
+    cmd = [sys.executable, __file__, "--one", repr(c_pct), "--tau-ratio", repr(args.tau_ratio),
+           "--spinup", repr(args.spinup), "--spinup-threads", str(args.spinup_threads), "--steps", str(args.steps),
+           "--threads", *map(str, args.threads),
+           "--cases", str(args.cases), "--lmp", args.lmp, "--lammps-skin", repr(args.lammps_skin),
+           "--lammps-segment", str(args.lammps_segment)]
+    if not args.no_lammps and any(abs(c_pct - x) < 1e-9 for x in args.lammps_concentrations):
+        cmd.append("--lammps-on")
+    if args.keep:
+        cmd += ["--keep", args.keep]
+    res = subprocess.run(cmd, stdout=subprocess.PIPE, text=True)  # stderr: progress, passed through
+    if res.returncode != 0 or not res.stdout.strip():
+        return {"concentration_pct": c_pct, "error": f"rc {res.returncode}"}
+    return json.loads(res.stdout.strip().splitlines()[-1])
+
+
+def sweep_estimate(rows, path, threads=1):
+    """Wall time of the full sweep with WORKERS workers × 1 thread from the measured rates."""
+    from saltation.case.schema import load_case
+    from saltation.studies.sweep import load_sweep
+
+    meas = sorted((r["concentration_pct"], r["runs"][str(threads)]["us_per_grain_step"]) for r in rows
+                  if "error" not in r and str(threads) in r.get("runs", {}))
+    if not meas:
+        return None
+    cs = [m[0] for m in meas]
+
+    def cost_us(c):  # µs per grain-step at c (%): measured, else linear in C between measured points
+        for x, y in meas:
+            if abs(x - c) < 0.005:
+                return y, False
+        if c <= cs[0]:
+            return meas[0][1], True
+        if c >= cs[-1]:
+            return meas[-1][1], True
+        for (x0, y0), (x1, y1) in zip(meas, meas[1:]):
+            if x0 <= c <= x1:
+                return y0 + (y1 - y0) * (c - x0) / (x1 - x0), True
+
+    sw = load_sweep(path)
+    cases = []
+    for sc in sw.cases:
+        case = load_case(sc.tables, sc.values)
+        c_pct = 100.0 * case.concentration
+        us, interp = cost_us(c_pct)
+        core_s = case.n_particles * case.n_steps * us * 1e-6
+        cases.append({"name": sc.name, "concentration_pct": c_pct, "tau_ratio": case.tau_ratio,
+                      "n": case.n_particles, "steps": case.n_steps, "us_per_grain_step": us,
+                      "interpolated": interp, "core_s": core_s})
+    total = sum(x["core_s"] for x in cases)
+    finish = [0.0] * WORKERS  # greedy longest first
+    for x in sorted(cases, key=lambda x: -x["core_s"]):
+        finish[finish.index(min(finish))] += x["core_s"]
+    return {"sweep": str(path), "cases": cases, "core_s": total, "workers": WORKERS, "threads_per_worker": 1,
+            "wall_s_even_split": total / WORKERS, "wall_s_longest_first": max(finish),
+            "longest_case_s": max(x["core_s"] for x in cases),
+            "days_even_split": total / WORKERS / 86400.0, "days_longest_first": max(finish) / 86400.0}
+
+
+def print_table(rows, args):
+    print(f"\nCases of {Path(args.cases).name}, tau*/tau*c = {args.tau_ratio}, spin-up {args.spinup} s simulated, "
+          f"{args.steps} timed steps; times in us per grain-step")
+    head = (f"{'C %':>5} {'N':>5} {'thr':>3} {'g-steps/s':>10} {'us/g-st':>8} {'free fl.':>8} {'contacts':>8} "
+            f"{'bed':>6} {'n_sub':>5} {'engaged':>7} {'sub-sh.':>7} {'ns/sub':>7} {'cpu/wall':>8} {'load':>5}")
+    print(head + "\n" + "-" * len(head))
+    for r in rows:
+        if "error" in r:
+            print(f"{r['concentration_pct']:>5.2f} error: {r['error']}")
+            continue
+        for th, x in r["runs"].items():
+            print(f"{r['concentration_pct']:>5.2f} {r['n']:>5d} {th:>3} {x['grain_steps_per_s']:>10.4g} "
+                  f"{x['us_per_grain_step']:>8.3f} {x['free_flight_us']:>8.3f} {x['contacts_us']:>8.3f} "
+                  f"{x['bed_us']:>6.3f} {r['substeps_per_step']:>5d} {100 * r['engaged_fraction']:>6.1f}% "
+                  f"{100 * x['substep_share']:>6.1f}% {x['contacts_ns_per_substep_done'] or 0.0:>7.0f} "
+                  f"{x['cpu_per_wall']:>8.2f} {x['load_avg_1min']:>5.2f}")
+    print("engaged: grains sub-stepped in a step / N; sub-sh.: grain-sub-steps done / (N n_sub); ns/sub: contact "
+          "phase per grain-sub-step done")
+    for r in rows:
+        if "error" in r:
+            continue
+        extra = f", same end state on all thread counts: {r['same_end_state']}" if "same_end_state" in r else ""
+        print(f"C = {r['concentration_pct']:.2f} %: spin-up {r['spinup_s_simulated']:.3g} s ({r['spinup_steps']} steps, "
+              f"{r['spinup_wall_s']:.0f} s wall on {r['spinup_threads']} thr.); touching pairs {r['touching_pairs_start']}"
+              f" -> {r['touching_pairs_end']}, on the bed {r['bed_contacts_start']} -> {r['bed_contacts_end']}; "
+              f"{100 * r['share_below_2d_start']:.0f} % of grains below y = 2 d{extra}")
+        tr = r.get("spinup_trace") or []
+        if len(tr) >= 3:
+            print("    spin-up, grain-steps/s and % below 2 d at t = " + ", ".join(
+                f"{x['t_s']:.2f} s: {x['grain_steps_per_s']:.3g}, {100 * x['share_below_2d']:.0f}" for x in tr[::3]))
+    for r in rows:
+        lam = r.get("lammps")
+        if not lam:
+            continue
+        if "error" in lam:
+            print(f"\nLAMMPS at C = {r['concentration_pct']:.2f} %: {lam['error']}")
+            continue
+        r1 = r["runs"].get("1", {})
+        sec = lam["sections_s"]
+        print(f"\nContact part against LAMMPS {lam['version']} at C = {r['concentration_pct']:.2f} % ({lam['atoms']} "
+              f"grains; {lam['segments']} segments of {lam['steps_per_segment']} steps of h = {lam['timestep']:.4g} d/u*, "
+              f"each from our state at its step; skin {lam['skin']} d, 1 rank, load {lam['load_avg_1min']:.2f}):")
+        print(f"  LAMMPS loop {lam['loop_s']:.2f} s = {lam['ns_per_atom_step']:.0f} ns per atom-step (pair "
+              f"{sec.get('pair', 0):.2f} s, neigh {sec.get('neigh', 0):.2f} s, modify {sec.get('modify', 0):.2f} s, "
+              f"{lam['neighbor_builds']} list builds, {lam['cpu_use_percent']:.1f} % CPU)")
+        print(f"  touching pairs, mean over segments: ours at the segment starts "
+              f"{lam['ours_touching_pairs_at_segment_starts']:.1f}, LAMMPS first step {lam['touching_pairs_first']:.1f}"
+              f", last step {lam['touching_pairs_last']:.1f}; on the bed: ours "
+              f"{lam['ours_bed_contacts_at_segment_starts']:.1f}, LAMMPS {lam['bed_contacts_first']:.1f} -> "
+              f"{lam['bed_contacts_last']:.1f} (no fluid in LAMMPS: the grains fall)")
+        if r1:
+            print(f"  ours (1 thread): contact phase {r1['contacts_s']:.2f} s = {r1['contacts_ns_per_substep_done']:.0f}"
+                  f" ns per grain-sub-step done ({100 * r1['substep_share']:.1f} % of N x n_sub), "
+                  f"{r1['contacts_ns_per_grain_substep']:.0f} ns per grain x sub-step of all grains")
+            print(f"  ratio ours/LAMMPS per engaged grain-sub-step: {lam.get('ratio_per_engaged', float('nan')):.3g}"
+                  f"   (ours sub-steps only engaged grains; LAMMPS every atom every step)")
+            print(f"  ratio ours/LAMMPS per grain x sub-step (all grains, same physical time): "
+                  f"{lam['ratio_per_grain']:.3g}   (< 1: ours is cheaper)")
+
+
+def print_estimate(est):
+    if not est:
+        return
+    print(f"\nFull sweep ({Path(est['sweep']).name}: {len(est['cases'])} cases, 200 s each, the paper's domain) "
+          f"on this machine, {est['workers']} workers x 1 thread:")
+    taus = sorted({x["tau_ratio"] for x in est["cases"]})
+    steps = {x["tau_ratio"]: x["steps"] for x in est["cases"]}
+    print("  steps per case: " + ", ".join(f"{steps[t]} at tau*/tau*c = {t}" for t in taus))
+    head = f"{'C %':>5} {'N':>6} {'us/g-st':>8} " + " ".join(f"{'core-h ' + str(t):>12}" for t in taus)
+    print(head + "\n" + "-" * len(head))
+    by_c = {}
+    for x in est["cases"]:
+        by_c.setdefault(round(x["concentration_pct"], 3), []).append(x)
+    for cp, xs in sorted(by_c.items()):
+        xs.sort(key=lambda x: x["tau_ratio"])
+        mark = "*" if xs[0]["interpolated"] else " "
+        print(f"{cp:>5.2f} {xs[0]['n']:>6d} {xs[0]['us_per_grain_step']:>7.2f}{mark} "
+              + " ".join(f"{x['core_s'] / 3600:>12.1f}" for x in xs))
+    print("* not measured: linear in C between the measured concentrations, constant beyond them")
+    print(f"  total {est['core_s'] / 3600:.0f} core-hours; wall time {est['days_even_split']:.1f} days split evenly over "
+          f"{est['workers']} workers, {est['days_longest_first']:.1f} days with longest-case-first scheduling "
+          f"(longest case {est['longest_case_s'] / 86400:.1f} days)")
+    print("  assumes: cost per grain-step at a concentration independent of domain size and of tau*/tau*c (measured "
+          "at one), the post-spin-up state representative of 200 s, a free core per worker; stepping only (no "
+          "outputs: jumps, variances, checkpoints)")
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--concentrations", type=float, nargs="+", default=list(PAPER_C), help="%% (default all eight)")
+    ap.add_argument("--tau-ratio", type=float, default=1.79)
+    ap.add_argument("--spinup", type=float, default=1.0, help="simulated seconds before timing (default 1.0)")
+    ap.add_argument("--spinup-threads", type=int, default=1,
+                    help="threads for the spin-up (default 1: on a shared machine 2 threads can be much slower)")
+    ap.add_argument("--steps", type=int, default=200)
+    ap.add_argument("--threads", type=int, nargs="+", default=[1, 2])
+    ap.add_argument("--no-lammps", action="store_true")
+    ap.add_argument("--lammps-concentrations", type=float, nargs="+", default=[3.94])
+    ap.add_argument("--lammps-skin", type=float, default=0.3)
+    ap.add_argument("--lammps-segment", type=int, default=10,
+                    help="hydrodynamic steps per LAMMPS segment, each started from our state at that step")
+    ap.add_argument("--lmp", default="lmp")
+    ap.add_argument("--keep", default=None, help="keep the LAMMPS files under this directory")
+    ap.add_argument("--cases", default=str(REDUCED),
+                    help="sweep file the measured cases come from (default the reduced sweep; the full sweep "
+                         "cases/concentration_sweep.toml checks the domain-size assumption)")
+    ap.add_argument("--sweep", default=str(FULL), help="the full sweep to estimate")
+    ap.add_argument("--json", default=None)
+    ap.add_argument("--print-json", default=None, metavar="FILE", help="print the table and estimate of a saved --json")
+    ap.add_argument("--one", type=float, default=None, help=argparse.SUPPRESS)
+    ap.add_argument("--lammps-on", action="store_true", help=argparse.SUPPRESS)
+    args = ap.parse_args()
+    if args.one is not None:
+        print(json.dumps(one_concentration(args)))
+        return
+    if args.print_json:  # the table and the estimate again, from a saved --json
+        saved = json.loads(Path(args.print_json).read_text())
+        for k in ("tau_ratio", "spinup", "steps", "cases", "sweep"):
+            key = {"spinup": "spinup_s"}.get(k, k)
+            if key in saved:
+                setattr(args, k, saved[key])
+        rows = sorted(saved["concentrations"], key=lambda r: r["concentration_pct"])
+        print_table(rows, args)
+        print_estimate(sweep_estimate(rows, args.sweep))
+        print(f"\n(saved {saved.get('date')}, command: {saved.get('command')})")
+        return
+    t0 = time.perf_counter()
+    start = {"date": time.strftime("%Y-%m-%d %H:%M:%S"), "load_avg": os.getloadavg(), "cpu_count": os.cpu_count(),
+             "command": " ".join(sys.argv)}
+    rows = []
+    for c in args.concentrations:
+        rows.append(run_one(c, args))
+        print(f"[done C = {c} %, {time.perf_counter() - t0:.0f} s so far]", file=sys.stderr, flush=True)
+        if args.json:  # what is done so far, in case the run is cut short
+            with open(args.json, "w") as fh:
+                json.dump({**start, "partial": True, "concentrations": rows}, fh, indent=1)
+    rows.sort(key=lambda r: r["concentration_pct"])
+    print_table(rows, args)
+    est = sweep_estimate(rows, args.sweep)
+    print_estimate(est)
+    result = {**start, "tau_ratio": args.tau_ratio, "spinup_s": args.spinup, "steps": args.steps,
+              "cases": str(args.cases), "sweep": str(args.sweep),
+              "threads": args.threads, "concentrations": rows, "full_sweep_estimate": est,
+              "wall_s": time.perf_counter() - t0, "load_avg_end": os.getloadavg()}
+    print(f"\n(benchmark wall time {result['wall_s']:.0f} s; load average at start {start['load_avg'][0]:.2f}, "
+          f"end {result['load_avg_end'][0]:.2f}, {os.cpu_count()} CPUs)")
+    if args.json:
+        with open(args.json, "w") as fh:
+            json.dump(result, fh, indent=1)
+
+
+if __name__ == "__main__":
+    main()
