@@ -59,7 +59,7 @@ BED_CENTRE_Y = -0.5  # bed sphere centres: their tops at y = 0
 MAX_BOUNCES = 4  # impulses per grain and step at most
 PUSH_SWEEPS = 8  # Gauss–Seidel sweeps that remove residual overlaps
 
-__all__ = ["PackedBed", "make_packed_bed", "packed_bed_check_particle", "bed_overlap", "BED_CENTRE_Y"]
+__all__ = ["PackedBed", "make_packed_bed", "bed_from_centres", "hexagonal_pockets", "packed_bed_check_particle", "bed_overlap", "BED_CENTRE_Y"]
 
 
 class PackedBed(NamedTuple):
@@ -95,10 +95,54 @@ def make_packed_bed(lx: float, lz: float, cut: float = 1.0) -> PackedBed:
     if not (lx >= 3.0 and lz >= 3.0):
         raise ValueError(f"packed bed needs a domain of at least 3 d in x and z, got {lx!r} × {lz!r} d")
     centres, sx, sz = hexagonal_layer(lx, lz)
+    return bed_from_centres(centres, lx, lz, cut, (sx, sz))
+
+
+def bed_from_centres(centres, lx: float, lz: float, cut: float = 1.0, spacing=(1.0, 1.0)) -> PackedBed:
+    """A bed of fixed spheres of diameter d at the given centres (M, 3) (d; x and z in
+    [0, lx) × [0, lz), periodic), sorted into cells of ≥ ``cut``. ``make_packed_bed``
+    gives the hexagonal layer; tests build other geometries (rails) with it."""
+    centres = np.ascontiguousarray(centres, dtype=np.float64)
     grid = make_grid((lx, 1.0, lz), max(1.0, float(cut)), (True, False, True))
     cell_of, cell_start, cell_count, order = allocate_cells(len(centres), grid)
     build_cells(centres, grid, cell_of, cell_start, cell_count, order)
-    return PackedBed(centres, grid.box, grid.n, grid.size, cell_start, cell_count, order, np.array([sx, sz]))
+    return PackedBed(centres, grid.box, grid.n, grid.size, cell_start, cell_count, order,
+                     np.array([float(spacing[0]), float(spacing[1])]))
+
+
+def hexagonal_pockets(lx: float, lz: float) -> np.ndarray:
+    """Centres (P, 3) of a grain resting in each hollow of the hexagonal layer of
+    ``make_packed_bed(lx, lz)``: the point at distance d from the three bed spheres of a
+    triangle (two per bed sphere; y = −1/2 + √(1 − R²) with R the triangle's
+    circumradius, √(2/3) − 1/2 = 0.316 d for touching spheres). x and z in the box."""
+    centres, sx, sz = hexagonal_layer(lx, lz)
+    nx = max(1, int(round(lx)))
+    nr = 2 * max(1, int(round(lz / math.sqrt(3.0))))
+    out = []
+    for r in range(nr):
+        shift = 0.5 * (r % 2)  # row r's offset; row r + 1 has the other one
+        z0, z1 = r * sz, (r + 1) * sz
+        for ix in range(nx):
+            a = np.array([(ix + shift) * sx, z0])
+            b = np.array([(ix + 1 + shift) * sx, z0])
+            # the row-(r+1) sphere between a and b, and the row-r sphere between two of row r+1
+            above = np.array([(ix + shift + 0.5) * sx, z1])
+            above_next = np.array([(ix + shift + 1.5) * sx, z1])
+            for tri in ((a, b, above), (b, above, above_next)):
+                cx, cz, rad = _circumcircle(*tri)
+                out.append((cx % lx, BED_CENTRE_Y + math.sqrt(max(1.0 - rad * rad, 0.0)), cz % lz))
+    return np.array(out)
+
+
+def _circumcircle(p, q, r):
+    """Centre (x, z) and radius of the circle through three points in the (x, z) plane."""
+    ax, az = p
+    bx, bz = q
+    cx, cz = r
+    dd = 2.0 * (ax * (bz - cz) + bx * (cz - az) + cx * (az - bz))
+    ux = ((ax * ax + az * az) * (bz - cz) + (bx * bx + bz * bz) * (cz - az) + (cx * cx + cz * cz) * (az - bz)) / dd
+    uz = ((ax * ax + az * az) * (cx - bx) + (bx * bx + bz * bz) * (ax - cx) + (cx * cx + cz * cz) * (bx - ax)) / dd
+    return ux, uz, math.hypot(ax - ux, az - uz)
 
 
 @njit(cache=True, _nrt=False, inline="always")

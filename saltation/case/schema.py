@@ -547,6 +547,11 @@ class RunConfig(_Table):
     release_height: float | None = _key(kind="float", unit="d", ge=0.5,
                                         doc="centre height above the bed top, in d, where "
                                             "every grain starts at rest (settling runs)")
+    start: str = _key("flight", kind="choice", choices=("flight", "rest"),
+                      doc='how grains start: "flight" (near-bed layer, take-off velocities; '
+                          'grains/initial.py) or "rest" (each at rest in a hollow of the packed '
+                          'bed: bed load, incipient motion; needs bed.model = "packed", '
+                          'collisions.model = "soft" and spheres)')
 
     def __post_init__(self):
         if self.dt is None and self.dt_particle is None:
@@ -938,6 +943,20 @@ class Case:
                     f'e = 0.75 - 0.25 τ*/τ*c = {e:.4g} at τ*/τ*c = {self.tau_ratio:.4g}, '
                     f'outside [0, 1]: that set holds for τ*/τ*c <= 3 only; choose another '
                     f'bed.coefficients set', "bed", "coefficients")
+
+        if self.run.start == "rest":
+            need = [(f'bed.model = "{self.bed.model}"', self.bed.model == "packed", '"packed" (hollows to rest in)'),
+                    (f'collisions.model = "{self.collisions.model}"', self.collisions.model == "soft",
+                     '"soft" (resting contacts are soft contacts with the bed spheres)'),
+                    (f'particle.shape = "{self.particle.shape}"', self.particle.shape == "sphere",
+                     '"sphere" (bonded-sphere grains have no soft bed contacts yet)')]
+            for given, ok, want in need:
+                if not ok:
+                    raise CaseError(f'run.start = "rest" needs {want}, got {given}', "run", "start")
+            if self.run.release_height is not None:
+                raise CaseError('run.start = "rest" and run.release_height are both given: give one '
+                                '(rest: in a hollow of the bed; release_height: at rest at that height)',
+                                "run", "start")
 
         c = self.collisions
         if c.model == "soft" and c.stiffness is not None:

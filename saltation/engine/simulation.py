@@ -21,10 +21,11 @@ import numba
 import numpy as np
 import pandas as pd
 
+from ..bed.packed import hexagonal_pockets as resting_pockets
 from ..bed.virtual import run_bed_parameters
-from ..case.schema import Case, dump_toml, load_case, resolve_domain
+from ..case.schema import Case, CaseError, dump_toml, load_case, resolve_domain
 from ..flight.spheres import NOT_FINITE, GrainState, make_state, make_workspace
-from ..grains.initial import initial_conditions, initial_conditions_apart
+from ..grains.initial import initial_conditions, initial_conditions_apart, initial_conditions_resting
 from ..io.progress import compile_notice
 from ..io.run_directory import CHECKPOINT_NAME
 from ..io.writers import JumpWriter, ParaViewWriter, TrackWriter, run_metadata, write_json, write_table
@@ -211,8 +212,16 @@ class Simulation:
 
     def _initial_state(self):
         c = self.case
-        start = initial_conditions if c.collisions.model == "off" else initial_conditions_apart
-        pos, vel, spin = start(self.n, self.domain_d, c.run.seed, c.run.release_height)
+        if c.run.start == "rest":
+            try:
+                pos, vel, spin = initial_conditions_resting(self.n, resting_pockets(*self.domain_d), self.domain_d,
+                                                            c.run.seed)
+            except ValueError as err:
+                raise CaseError(f'run.start = "rest": {err}; lower run.n_particles or enlarge run.domain',
+                                "run", "n_particles") from None
+        else:
+            start = initial_conditions if c.collisions.model == "off" else initial_conditions_apart
+            pos, vel, spin = start(self.n, self.domain_d, c.run.seed, c.run.release_height)
         return make_state(pos, vel, spin, 0.0, self.n_window)
 
     def _fail(self, st, step_base, steps_done):

@@ -14,6 +14,8 @@ In particle units (d, u*, u*/d), uniform draws:
 * spin: ϖ_z in [-2, 0] (topspin), ϖ_x, ϖ_y in [-0.5, 0.5] u*/d.
 
 With ``release_height`` (settling experiments) every grain starts at rest at that height.
+With ``run.start = "rest"`` (bed load, SPEC §7) every grain starts at rest in a hollow
+of the packed bed (``initial_conditions_resting``).
 Draws come from numpy's PCG64 seeded with the case seed: same seed, same grains.
 """
 from __future__ import annotations
@@ -63,3 +65,34 @@ def initial_conditions_apart(n: int, domain_d, seed: int, release_height=None, m
     pos[:, 2] = placed[:, 2]
     pos[:, 1] = bottom + placed[:, 1]
     return pos, vel, spin
+
+
+def initial_conditions_resting(n: int, pockets, domain_d, seed: int, min_gap: float = 0.02):
+    """(pos, vel, spin) of n grains at rest, each in its own hollow of the packed bed
+    (``pockets``: (P, 3) resting centres, bed.packed.hexagonal_pockets), hollows drawn in
+    a random order (PCG64, the case seed) and taken when no grain already placed is closer
+    than d (1 + min_gap) (minimum image in x, z). Raises ValueError when the bed has room
+    for fewer than n such grains (about one per bed sphere at most)."""
+    lx, lz = domain_d
+    pockets = np.asarray(pockets, dtype=np.float64)
+    order = np.random.default_rng(seed).permutation(len(pockets))
+    taken = []
+    limit = (1.0 + min_gap) ** 2
+    for k in order:
+        p = pockets[k]
+        if taken:
+            q = pockets[taken]
+            dx = q[:, 0] - p[0]
+            dz = q[:, 2] - p[2]
+            dx -= lx * np.round(dx / lx)
+            dz -= lz * np.round(dz / lz)
+            if np.min(dx * dx + (q[:, 1] - p[1]) ** 2 + dz * dz) < limit:
+                continue
+        taken.append(k)
+        if len(taken) == n:
+            break
+    if len(taken) < n:
+        raise ValueError(f"the packed bed of {lx:.4g} x {lz:.4g} d has room for {len(taken)} grains at rest "
+                         f"in separate hollows, fewer than the {n} asked for")
+    pos = pockets[np.array(taken)].copy()
+    return pos, np.zeros((n, 3)), np.zeros((n, 3))
