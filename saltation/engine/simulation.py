@@ -282,6 +282,9 @@ class Simulation:
         c = self.case
         self.out.mkdir(parents=True, exist_ok=True)
         ckpt = self._read_checkpoint() if self.resume else None
+        # the initial state before any file is written: a case that cannot start (no room
+        # for its grains at rest) leaves the directory as it was
+        new = self._new_state() if ckpt is None else None
         if ckpt is None:
             (self.out / "config.toml").write_text(dump_toml(c))
             for stale in (self.out / CHECKPOINT, self.out / PARTS):
@@ -295,7 +298,7 @@ class Simulation:
         if ckpt:
             st, ws, rows = ckpt[1], ckpt[2], ckpt[3]
         else:
-            (st, ws), rows = self._new_state(), []
+            (st, ws), rows = new, []
         self._start(st, resumed=ckpt is not None)
         f = self.flow.arrays
         d, ts = c.particle.diameter, c.time_scale

@@ -67,17 +67,18 @@ def initial_conditions_apart(n: int, domain_d, seed: int, release_height=None, m
     return pos, vel, spin
 
 
-def initial_conditions_resting(n: int, pockets, domain_d, seed: int, min_gap: float = 0.02):
+def initial_conditions_resting(n: int, pockets, domain_d, seed: int, min_gap: float = 0.0):
     """(pos, vel, spin) of n grains at rest, each in its own hollow of the packed bed
     (``pockets``: (P, 3) resting centres, bed.packed.hexagonal_pockets), hollows drawn in
     a random order (PCG64, the case seed) and taken when no grain already placed is closer
-    than d (1 + min_gap) (minimum image in x, z). Raises ValueError when the bed has room
-    for fewer than n such grains (about one per bed sphere at most)."""
+    than d (1 + min_gap) (minimum image in x, z; neighbours may touch, as in the second
+    layer of a close packing). Raises ValueError when the bed has room for fewer than n
+    such grains (one per bed sphere at most, about 0.6 by random filling)."""
     lx, lz = domain_d
     pockets = np.asarray(pockets, dtype=np.float64)
     order = np.random.default_rng(seed).permutation(len(pockets))
     taken = []
-    limit = (1.0 + min_gap) ** 2
+    limit = (1.0 + min_gap) ** 2 * (1.0 - 1e-9)
     for k in order:
         p = pockets[k]
         if taken:

@@ -1,0 +1,153 @@
+"""Grains at rest on the packed bed (SPEC §7, issue 20): resting and rolling contacts are
+soft contacts with the bed spheres (physics/contact_law) while the fluid force acts every
+step. Checked against analysis: a grain at rest in a hollow stays there in still water;
+the critical tilt of a sphere in the hollow of three touching spheres; rolling without
+slip down two rails, and sliding once the slope asks more friction than the contacts have.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+import saltation
+import saltation.engine.simulation as simulation
+import saltation.engine.stepping as stepping
+from saltation.bed.packed import BED_CENTRE_Y, bed_from_centres, hexagonal_layer, hexagonal_pockets
+from saltation.case import CaseError
+
+D = 0.69e-3  # m
+# still water: velocity scale √(g R d), the submerged weight per virtual mass is
+# g' = 1/(1 + R + Cm) in particle units (physics/forces.py, τ* = 1)
+R, CM = 1.65, 0.5
+G_V = 1.0 / (1.0 + R + CM)
+LX, LZ = 6.0, 4.0 * math.sqrt(3.0)  # d: a hexagonal layer of touching spheres (6 × 8 rows)
+
+
+def _case(n, slope=0.0, duration=0.3, **tables):
+    case = {
+        "particle": {"diameter": D, "density": 1000.0 * (1 + R)},
+        "fluid": {"density": 1000.0, "viscosity": 1e-6},
+        "flow": {"source": "still", "slope": slope},
+        "bed": {"model": "packed"},
+        "collisions": {"model": "soft"},
+        "run": {"n_particles": n, "duration": duration, "dt_particle": 0.005, "seed": 3, "start": "rest",
+                "domain": [LX * D, LZ * D, 10 * D]},
+        "output": {"vtk": False, "variance": False},
+    }
+    for t, keys in tables.items():
+        case.setdefault(t, {}).update(keys)
+    return case
+
+
+def _displacements(tracks):
+    g = tracks.groupby("particle")
+    a, b = g.first(), g.last()
+    return np.sqrt((b.x - a.x) ** 2 + (b.y - a.y) ** 2 + (b.z - a.z) ** 2).to_numpy()
+
+
+def test_pockets_touch_three_bed_spheres():
+    centres, _, _ = hexagonal_layer(7.3, 5.1)  # stretched rows too
+    pockets = hexagonal_pockets(7.3, 5.1)
+    assert len(pockets) == 2 * len(centres)
+    for p in pockets:
+        d = centres - p
+        d[:, 0] -= 7.3 * np.round(d[:, 0] / 7.3)
+        d[:, 2] -= 5.1 * np.round(d[:, 2] / 5.1)
+        r = np.sort(np.linalg.norm(d, axis=1))
+        np.testing.assert_allclose(r[:3], 1.0, atol=1e-12)
+        assert r[3] > 1.05
+
+
+def test_rest_needs_packed_soft_spheres(tmp_path):
+    for tables, word in (({"bed": {"model": "virtual"}}, "bed.model"),
+                         ({"collisions": {"model": "hard"}}, "collisions.model")):
+        with pytest.raises(CaseError, match=word):
+            saltation.load_case(_case(4, **tables))
+    with pytest.raises(CaseError, match="room for"):
+        full = _case(40)
+        full["run"]["domain"][2] = 100 * D
+        saltation.run(full, out=tmp_path / "full")
+    assert not (tmp_path / "full" / "config.toml").exists()
+
+
+def test_grain_at_rest_stays_in_still_water(tmp_path):
+    """Target (issue 20): drift < 1e-3 d over 10⁴ steps."""
+    r = saltation.run(_case(8, duration=0.35), out=tmp_path / "still")
+    assert r.summary["steps"] >= 10_000
+    drift = _displacements(r.tracks)
+    assert drift.max() < 1e-3, drift
+    assert np.abs(r.tracks.y.to_numpy() - (math.sqrt(2 / 3) - 0.5)).max() < 1e-3
+    assert r.summary["jumps"]["count"] == 0
+
+
+# Critical tilt of a sphere in the hollow of three touching equal spheres: it rolls out
+# over the two downslope contacts when the vertical through its centre leaves the
+# triangle of contact points: tan θc = r_in/(h cos ψ), r_in = d/(4√3) the triangle's
+# inradius, h = √(2/3) d/2 the centre's height above it, ψ = 30° between the tilt (+x)
+# and the edge's outward normal in both kinds of hollow of our layer: θc = 22.21°.
+THETA_C = math.degrees(math.atan((1 / (4 * math.sqrt(3))) / (math.sqrt(2 / 3) / 2 * math.cos(math.radians(30)))))
+
+
+@pytest.mark.parametrize("factor, moves", [(0.95, False), (1.05, True)])
+def test_critical_tilt_of_a_grain_in_a_hollow(tmp_path, factor, moves):
+    assert abs(THETA_C - 22.21) < 0.01
+    r = saltation.run(_case(8, slope=factor * THETA_C, duration=0.3), out=tmp_path / "tilt")
+    drift = _displacements(r.tracks)
+    if moves:
+        assert drift.min() > 0.5, drift  # every grain has left its hollow
+    else:
+        assert drift.max() < 1e-2, drift
+
+
+# Rolling down two rails: bed spheres of diameter d spaced `SPACING` along x at z = ±W
+# about the grain; its centre lies √(1 − W²) above them, the contact points at ρ =
+# √(1 − W²)/2 from it on the rolling axis. Without fluid forces, rolling without slip
+# gives a = g' sin θ / (1 + I/(m ρ²)) (m = 1, I = 0.1 in the contact phase), which needs
+# |F_t| = I a/ρ² ≤ μ N, N = g' cos θ / cos φ (cos φ = √(1 − W²): the normals' tilt);
+# beyond, it slides with a = g' (sin θ − μ cos θ / cos φ).
+W = 0.8
+RHO = math.sqrt(1 - W * W) / 2
+MU = 0.10  # the bed friction of the default coefficients (Schmeeckle et al. 2001)
+
+
+def _rails(monkeypatch, spacing):
+    lz = 4.0
+    xs = np.arange(0.0, LX, spacing)
+    rails = np.concatenate([np.column_stack([xs, np.full(xs.size, BED_CENTRE_Y), np.full(xs.size, lz / 2 + s * W)])
+                            for s in (-1, 1)])
+    monkeypatch.setattr(stepping, "make_packed_bed", lambda a, b, cut=1.0: bed_from_centres(rails, a, b, cut))
+    monkeypatch.setattr(simulation, "resting_pockets",
+                        lambda a, b: np.array([[1.0, BED_CENTRE_Y + math.sqrt(1 - W * W), lz / 2]]))
+    return lz
+
+
+def _roll(monkeypatch, tmp_path, slope, spacing=0.025):
+    lz = _rails(monkeypatch, spacing)
+    off = {k: False for k in ("drag", "lift", "magnus", "added_mass", "fluid_acceleration", "basset", "spin")}
+    case = _case(1, slope=slope, duration=0.1, forces=off)
+    case["run"]["domain"] = [LX * D, lz * D, 10 * D]
+    case["output"]["tracks_interval"] = 0.2 * math.sqrt(D / (9.81 * R))  # 0.2 d/u*
+    tr = saltation.run(case, out=tmp_path / f"roll{slope}").tracks
+    a = 2.0 * np.polyfit(tr.t.to_numpy(), tr.x.to_numpy(), 2)[0]
+    slip = tr.u.to_numpy()[-1] / (RHO * -tr.spin_z.to_numpy()[-1])  # 1: rolling without slip
+    return a, slip
+
+
+@pytest.mark.parametrize("slope", [5.0, 15.0])
+def test_rolling_down_rails(monkeypatch, tmp_path, slope):
+    theta = math.radians(slope)
+    assert MU * math.cos(theta) / math.sqrt(1 - W * W) > 0.1 / RHO**2 * G_V * math.sin(theta) / (1 + 0.1 / RHO**2) / G_V
+    a, slip = _roll(monkeypatch, tmp_path, slope)
+    expected = G_V * math.sin(theta) / (1 + 0.1 / RHO**2)
+    assert abs(a / expected - 1) < 0.05, (a, expected)
+    assert abs(slip - 1) < 0.03, slip
+
+
+def test_sliding_past_the_friction_limit(monkeypatch, tmp_path):
+    theta = math.radians(25.0)
+    a, slip = _roll(monkeypatch, tmp_path, 25.0)
+    expected = G_V * (math.sin(theta) - MU * math.cos(theta) / math.sqrt(1 - W * W))
+    assert abs(a / expected - 1) < 0.05, (a, expected)
+    assert slip > 1.3, slip  # the grain slides: its surface moves slower than it
