@@ -353,7 +353,7 @@ def _analyze(args) -> int:
     from .analysis.report import analyze, windows_text
 
     res = analyze(args.directory, out=args.out, validation=args.validation, diameter=args.diameter,
-                  time_scale=args.time_scale)
+                  time_scale=args.time_scale, n_origins=args.origins)
     if res["kind"] in ("run", "tracks"):
         d = res["diffusion"]
         if d is not None:
@@ -473,6 +473,9 @@ def build_parser() -> argparse.ArgumentParser:
                         "default 1: already in d)")
     a.add_argument("--time-scale", type=float, default=1.0,
                    help="tracks file only: d/u* in the file's time unit (t is divided by it; default 1: already in d/u*)")
+    a.add_argument("--origins", type=int, default=8,
+                   help="tracks file only: time origins of the displacement statistics (default 8, spread over the "
+                        "record; 1: a tracer release at the first origin, 10 %% into the record)")
     a.add_argument("--validation", default=None,
                    help="folder written by `saltation validate nino-garcia` (default: DIR/validation or DIR/../validation if present)")
     a.set_defaults(func=_analyze)

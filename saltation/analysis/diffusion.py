@@ -8,7 +8,10 @@ equal elapsed time, then over several time origins (variance.py explains the pla
 * the **local** range, between two bed impacts: from the first sampled lag to ½ t_c
   (ballistic, γ ≈ 1);
 * the **intermediate** range, many jumps: from 3 t_c to the longest lag (half the record
-  after the first 10 % is skipped). γ = 0.5 normal diffusion, > 0.5 super-, < 0.5 sub-.
+  after the first 10 % is skipped), or to t_g where a global range is seen. γ = 0.5 normal
+  diffusion, > 0.5 super-, < 0.5 sub-;
+* the **global** range, many rest periods (resting grains make it sub-diffusive, γ < 0.5):
+  from t_g to the longest lag, only where the curve bends a second time (below).
 
 **The crossover t_c** is found from the streamwise curve ⟨X′²⟩(t) itself: log⟨X′²⟩ against
 log t is fitted by two straight segments that meet at a breakpoint (continuous
@@ -21,6 +24,19 @@ meets the diffusive one, t_c ≈ E[T²]/E[T] ≈ the typical jump duration, so �
 are the fractions of T_J the ranges always used. The spanwise curve's breakpoint is fitted
 too and reported (``crossover_z``), not used.
 
+**The global range** is found from the same curve by a continuous **three**-segment fit
+of log⟨X′²⟩ against log t on the same grid (:func:`global_bend`; both breakpoints t_c <
+t_g scanned jointly, 0.005 decade apart, each segment at least ``CROSSOVER_MIN_SIDE`` grid
+points). The second bend is accepted only when (1) neither breakpoint falls at an end of
+its scan, (2) the log–log slope drops across t_c by ``CROSSOVER_MIN_DROP`` = 0.2 and
+(3) across t_g by ``GLOBAL_MIN_DROP`` = 0.3 (γ by 0.15), (4) at least
+``GLOBAL_MIN_BEYOND`` = 8 grid points (0.4 decade) lie beyond t_g, and (5) the 2.5 % bound
+of t_g's bootstrap interval is at least 3 t_c · 10^0.2, so that the intermediate window
+[3 t_c, t_g] holds its ``MIN_POINTS`` lags in nearly every replicate (a gradual single
+bend, which three segments split in two, fails this). Otherwise no global range is
+reported (``result["global_bend"]["reason"]`` says which test failed) and nothing below
+changes. t_g's 95 % interval comes from the bootstrap curves, as t_c's.
+
 **Rule for the windows** (each range not given in ``ranges``), the same for a tracks
 DataFrame, a tracks file and a run directory:
 
@@ -28,7 +44,12 @@ DataFrame, a tracks file and a run directory:
 2. otherwise the crossover t_c of ⟨X′²⟩: [first lag, ½ t_c] and [3 t_c, longest lag];
 3. only when no crossover is found (the fit's breakpoint falls at an end of the curve, or
    the slope does not drop across it by ``CROSSOVER_MIN_DROP``): the typical jump duration
-   T_J from the data, as 1.
+   T_J from the data, as 1;
+4. where the three-segment fit accepts a second bend t_g: the intermediate window ends at
+   t_g, the global window is [t_g, longest lag], and in 2 t_c is the three-segment fit's
+   first breakpoint (a two-segment fit of a three-range curve puts its one breakpoint
+   between the two bends). Without a second bend the windows are those of 1–3 and there
+   is no global range.
 
 T_J from the data is the median duration of the counted jumps in jumps.parquet (each
 grain's first 10 dropped, paper §3.2) or, from tracks with a centre height y, the median
@@ -49,8 +70,8 @@ gradual, t_c also depends on how far the curve reaches on each side.
 Entry point (SPEC §9): ``exponents(tracks, ranges=None)`` with ``tracks`` a tracks
 DataFrame (columns particle, t, x, z, optionally y, …; t in d/u*, x, z unwrapped in d) or
 a run directory (variance.parquet is used when present, tracks.parquet otherwise). The
-result is a dict ``{"local": {"gamma_x", "gamma_z", …}, "intermediate": {…}, "windows": …,
-"crossover": …}`` with ``.table`` (tidy DataFrame) and ``.curves`` (the variance curves).
+result is a dict ``{"local": {"gamma_x", "gamma_z", …}, "intermediate": {…}, "global": {…}
+(only where seen), "windows": …, "crossover": …, "global_bend": …}`` with ``.table`` (tidy DataFrame) and ``.curves`` (the variance curves).
 ``read_tracks_file`` reads a CSV or Parquet file of tracks (``saltation analyze FILE``).
 """
 from __future__ import annotations
@@ -64,8 +85,8 @@ import pandas as pd
 from ..engine.statistics import DISCARDED_JUMPS  # paper §3.2, as the run's statistics
 from .variance import VARIANCE_FILE, AnalysisError, VarianceAccumulator, make_plan, read_sums, variance_curves
 
-__all__ = ["exponents", "DiffusionResult", "AnalysisError", "crossover", "jump_duration_from_tracks", "read_tracks_file",
-           "sums_from_tracks"]
+__all__ = ["exponents", "DiffusionResult", "AnalysisError", "crossover", "global_bend", "jump_duration_from_tracks",
+           "read_tracks_file", "sums_from_tracks"]
 
 MIN_PARTICLES = 10  # fewer grains give no meaningful ensemble variance
 MIN_POINTS = 5  # lags a range must hold for a log–log fit
@@ -78,26 +99,35 @@ CROSSOVER_MIN_DROP = 0.2  # log–log slope must fall by this (γ by 0.1) across
 CROSSOVER_DIRECTION = "x"  # the curve whose breakpoint sets the windows
 CONTACT_HEIGHT = 1.5  # d: a local minimum of the centre height below this is a bed contact
 N_BOOTSTRAP = 400
-RANGE_NAMES = ("local", "intermediate")
+GLOBAL_MIN_DROP = 0.3  # log–log slope must fall by this (γ by 0.15) across the second breakpoint t_g
+GLOBAL_MIN_BEYOND = 8  # grid points beyond t_g at least (0.4 decade: 8 lags of the 20-per-decade plan)
+RANGE_NAMES = ("local", "intermediate")  # the ranges always fitted (and compared with the paper)
+GLOBAL = "global"  # the third range, fitted only where the curve shows a second bend
+ALL_RANGES = RANGE_NAMES + (GLOBAL,)
 TABLE_COLUMNS = ["direction", "range", "t_min", "t_max", "gamma", "ci_low", "ci_high", "alpha",
                  "n_points", "n_particles", "n_origins", "source", "windows_from", "t_c", "t_c_low", "t_c_high"]
+GLOBAL_COLUMNS = ["t_g", "t_g_low", "t_g_high"]  # added to the table only where a global range is seen
 TRACK_COLUMNS = {"particle": "grain id", "t": "time, d/u*", "x": "streamwise position, unwrapped, d",
                  "z": "spanwise position, unwrapped, d"}
 
 
 class DiffusionResult(dict):
-    """``{"local": {...}, "intermediate": {...}, "windows": {...}, "windows_from": {...},
-    "crossover": {...}, "crossover_z": {...}, "jump_duration": T_J, "jump_duration_from": …}``.
+    """``{"local": {...}, "intermediate": {...}, "global": {...} (only where a second bend is
+    seen), "windows": {...}, "windows_from": {...}, "crossover": {...}, "crossover_z": {...},
+    "global_bend": {...}, "jump_duration": T_J, "jump_duration_from": …}``.
 
     Each range entry holds gamma_x, gamma_z, their 95 % bootstrap intervals (ci_x, ci_z),
     t_min, t_max (d/u*) and n_points. ``windows_from`` says per range what set its window
-    ("ranges", "jump_duration", "crossover" or "jump_duration (no crossover: …)");
-    ``crossover`` is the two-segment fit of ⟨X′²⟩ (:func:`crossover`), ``crossover_z`` that
-    of ⟨Z′²⟩ (reported only). ``jump_duration`` is T_J as given or found from the data
+    ("ranges", "jump_duration", "crossover", "jump_duration (no crossover: …)" or, for the
+    global range, "second bend"); ``crossover`` is the two-segment fit of ⟨X′²⟩
+    (:func:`crossover`), ``crossover_z`` that of ⟨Z′²⟩ (reported only), ``global_bend`` the
+    three-segment fit of ⟨X′²⟩ (:func:`global_bend`: t_c, t_g and their intervals, or why no
+    global range is seen). ``jump_duration`` is T_J as given or found from the data
     (None if unknown), ``jump_duration_from`` where it came from ("given", "jumps.parquet",
     "bed contacts in the tracks" or None). Attributes: ``table`` (tidy rows: direction, range, t_min, t_max,
     gamma, ci_low, ci_high, alpha, n_points, n_particles, n_origins, source, windows_from,
-    t_c, t_c_low, t_c_high), ``curves`` (lag t, var_x, var_z, n_origins) and ``problems``
+    t_c, t_c_low, t_c_high — t_c being the crossover that set the windows — and, only where a
+    global range is seen, t_g, t_g_low, t_g_high), ``curves`` (lag t, var_x, var_z, n_origins) and ``problems``
     (ranges that could not be fitted, with the reason; empty unless ``strict=False``).
     """
 
@@ -239,6 +269,34 @@ def _fit_slopes(logt: np.ndarray, logv: np.ndarray) -> np.ndarray:
     return ((logv - logv.mean(axis=-1, keepdims=True)) @ tc) / (tc @ tc)
 
 
+def _log_grid(t, var, boot, n_segments: int):
+    """log var interpolated (linearly in log–log) onto the grid log t = k ln10 / 20 inside
+    the curve's span: (grid, rows, reason) with rows[0] the curve and rows[1:] the usable
+    bootstrap replicates; reason is "" unless the curve is too short for ``n_segments``."""
+    t, var = np.asarray(t, float), np.asarray(var, float)
+    ok = (t > 0) & (var > 0) & np.isfinite(var)
+    if ok.sum() < 2:
+        return np.zeros(0), np.zeros((0, 0)), "the variance curve has fewer than 2 positive points"
+    lt, lv = np.log(t[ok]), np.log(var[ok])
+    k0 = int(np.ceil(CROSSOVER_PER_DECADE * lt[0] / np.log(10) - 1e-9))
+    k1 = int(np.floor(CROSSOVER_PER_DECADE * lt[-1] / np.log(10) + 1e-9))
+    grid = np.arange(k0, k1 + 1) * np.log(10) / CROSSOVER_PER_DECADE
+    n = len(grid)
+    if n < n_segments * CROSSOVER_MIN_SIDE + 1:
+        word = {2: "two", 3: "three"}.get(n_segments, str(n_segments))
+        return grid, np.zeros((0, n)), (f"the curve spans {lt[-1] / np.log(10) - lt[0] / np.log(10):.2f} decade(s) of t: "
+                                        f"a {word}-segment fit needs at least "
+                                        f"{(n_segments * CROSSOVER_MIN_SIDE) / CROSSOVER_PER_DECADE:.2f}")
+    interp = np.stack([np.interp(grid, lt, e) for e in np.eye(len(lt))], axis=1)  # (n, len(lt))
+    ys = [(interp @ lv)[None, :]]
+    if boot is not None and len(boot):
+        b = np.asarray(boot, float)[:, ok]
+        good = (b > 0).all(axis=1) & np.isfinite(b).all(axis=1)
+        if good.any():
+            ys.append(np.log(b[good]) @ interp.T)
+    return grid, np.concatenate(ys), ""
+
+
 def crossover(t, var, boot=None, *, direction: str = CROSSOVER_DIRECTION) -> dict:
     """Ballistic-to-intermediate crossover of a variance curve: the breakpoint t_c of a
     continuous two-segment least-squares fit of log ``var`` against log ``t``.
@@ -253,33 +311,15 @@ def crossover(t, var, boot=None, *, direction: str = CROSSOVER_DIRECTION) -> dic
     var_c (t/t_c)^(2γ)), "fit_range", "n_points" (grid points),
     "n_boot" (replicates with a crossover), "direction", "reason" (why none was found)}.
     """
-    t, var = np.asarray(t, float), np.asarray(var, float)
     out = {"direction": direction, "found": False, "t_c": None, "ci": (float("nan"), float("nan")),
            "gamma_before": None, "gamma_after": None, "var_c": None, "fit_range": None, "n_points": 0, "n_boot": 0, "reason": ""}
-    ok = (t > 0) & (var > 0) & np.isfinite(var)
-    if ok.sum() < 2:
-        out["reason"] = "the variance curve has fewer than 2 positive points"
+    grid, yy, why = _log_grid(t, var, boot, 2)
+    out["n_points"] = len(grid)
+    if why:
+        out["reason"] = why
         return out
-    lt, lv = np.log(t[ok]), np.log(var[ok])
-    k0 = int(np.ceil(CROSSOVER_PER_DECADE * lt[0] / np.log(10) - 1e-9))
-    k1 = int(np.floor(CROSSOVER_PER_DECADE * lt[-1] / np.log(10) + 1e-9))
-    grid = np.arange(k0, k1 + 1) * np.log(10) / CROSSOVER_PER_DECADE
-    n = len(grid)
-    out["n_points"] = n
-    if n < 2 * CROSSOVER_MIN_SIDE + 1:
-        out["reason"] = (f"the curve spans {lt[-1] / np.log(10) - lt[0] / np.log(10):.2f} decade(s) of t: a two-segment "
-                         f"fit needs at least {(2 * CROSSOVER_MIN_SIDE) / CROSSOVER_PER_DECADE:.2f}")
-        return out
+    n, y = len(grid), yy[0]
     out["fit_range"] = (float(np.exp(grid[0])), float(np.exp(grid[-1])))
-    interp = np.stack([np.interp(grid, lt, e) for e in np.eye(len(lt))], axis=1)  # (n, len(lt))
-    y = interp @ lv
-    ys = [y[None, :]]
-    if boot is not None and len(boot):
-        b = np.asarray(boot, float)[:, ok]
-        good = (b > 0).all(axis=1) & np.isfinite(b).all(axis=1)
-        if good.any():
-            ys.append(np.log(b[good]) @ interp.T)
-    yy = np.concatenate(ys)  # row 0: the curve, then the replicates
     lo, hi = grid[CROSSOVER_MIN_SIDE - 1], grid[n - CROSSOVER_MIN_SIDE]
     cands = np.linspace(lo, hi, max(2, round((hi - lo) / (grid[1] - grid[0]) * CROSSOVER_SUBSTEPS) + 1))
     design = np.stack([np.ones((len(cands), n)), np.minimum(grid[None, :] - cands[:, None], 0.0),
@@ -314,16 +354,148 @@ def crossover(t, var, boot=None, *, direction: str = CROSSOVER_DIRECTION) -> dic
     return out
 
 
+def _three_segment_sse(yy, g, cands, i, j):
+    """Least-squares SSE and coefficients (a, s1, d1, d2) of rows ``yy`` (B, n) against the
+    continuous three-segment model a + s1 g + d1 (g − c_i)+ + d2 (g − c_j)+, for candidate
+    pairs (i, j) given as index arrays broadcastable to (B, P)."""
+    h = np.maximum(g[None, :] - cands[:, None], 0.0)  # (C, n) hinges
+    hi, hj = h[i], h[j]  # (…, P, n) or (B, P, n)
+    n = len(g)
+    shape = np.broadcast_shapes(hi.shape, hj.shape)
+    m = np.empty(shape[:-1] + (4, 4))
+    m[..., 0, 0], m[..., 0, 1] = n, g.sum()
+    m[..., 1, 1] = g @ g
+    m[..., 0, 2], m[..., 0, 3] = hi.sum(-1), hj.sum(-1)
+    m[..., 1, 2], m[..., 1, 3] = hi @ g, hj @ g
+    m[..., 2, 2], m[..., 3, 3] = (hi * hi).sum(-1), (hj * hj).sum(-1)
+    m[..., 2, 3] = (hi * hj).sum(-1)
+    iu = np.triu_indices(4, 1)
+    m[..., iu[1], iu[0]] = m[..., iu[0], iu[1]]
+    hy = yy @ h.T  # (B, C)
+    rows = np.arange(len(yy))[:, None]
+    ib, jb = np.broadcast_to(i, (len(yy),) + np.shape(i)[-1:]), np.broadcast_to(j, (len(yy),) + np.shape(j)[-1:])
+    v = np.stack(np.broadcast_arrays(yy.sum(1)[:, None], (yy @ g)[:, None], hy[rows, ib], hy[rows, jb]), axis=-1)
+    coef = np.linalg.solve(m, v[..., None])[..., 0]  # (B, P, 4)
+    sse = (yy * yy).sum(1)[:, None] - (coef * v).sum(-1)
+    return sse, coef
+
+
+def global_bend(t, var, boot=None, *, direction: str = CROSSOVER_DIRECTION) -> dict:
+    """The second bend of a variance curve, into the **global** range (Nikora et al. 2002:
+    many rest periods, resting grains make it sub-diffusive): the two breakpoints t_c < t_g
+    of a continuous three-segment least-squares fit of log ``var`` against log t, on the
+    same 20-per-decade grid as :func:`crossover`.
+
+    Both breakpoints are scanned jointly on the candidates of :func:`crossover` (0.005 decade
+    apart, every segment holding at least ``CROSSOVER_MIN_SIDE`` grid points): first on the
+    grid points, then refined within ±1 grid interval of the best pair. ``boot``
+    replicates are refitted alike for the 95 % intervals of t_c and t_g. The second bend is
+    **accepted** (``found``) only when (1) neither breakpoint falls at an end of its scan,
+    (2) the log–log slope drops across t_c by ``CROSSOVER_MIN_DROP`` (a ballistic-to-
+    intermediate crossover), (3) it drops across t_g by ``GLOBAL_MIN_DROP``, (4) at least
+    ``GLOBAL_MIN_BEYOND`` grid points (0.4 decade) lie beyond t_g, and (5) the lower (2.5 %)
+    bound of t_g's bootstrap interval (t_g itself without replicates) is at least
+    ``INTERMEDIATE_START`` t_c · 10^((MIN_POINTS − 1)/20): the intermediate window [3 t_c,
+    t_g] keeps its ``MIN_POINTS`` lags in nearly every replicate (a gradual ballistic-to-
+    intermediate bend, which a three-segment fit splits in two, fails this); otherwise ``reason`` says which failed and
+    no global range is reported. Returns {"found", "t_c", "t_c_ci", "t_g", "ci" (of t_g,
+    2.5, 97.5 %), "gammas" (half the three slopes), "var_c", "var_g" (the fit at t_c, t_g,
+    d²), "fit_range", "n_points", "n_beyond" (grid points beyond t_g), "n_boot", "direction",
+    "reason"}.
+    """
+    nan2 = (float("nan"), float("nan"))
+    out = {"direction": direction, "found": False, "t_c": None, "t_c_ci": nan2, "t_g": None, "ci": nan2,
+           "gammas": None, "var_c": None, "var_g": None, "fit_range": None, "n_points": 0, "n_beyond": 0, "n_boot": 0,
+           "reason": ""}
+    grid, yy, why = _log_grid(t, var, boot, 3)
+    out["n_points"] = n = len(grid)
+    if why:
+        out["reason"] = why + " (no global range)"
+        return out
+    out["fit_range"] = (float(np.exp(grid[0])), float(np.exp(grid[-1])))
+    step = grid[1] - grid[0]
+    sub = CROSSOVER_SUBSTEPS
+    lo, hi = grid[CROSSOVER_MIN_SIDE - 1], grid[n - CROSSOVER_MIN_SIDE]
+    n_c = int(round((hi - lo) / step * sub)) + 1
+    cands = np.linspace(lo, hi, n_c)
+    gap = (CROSSOVER_MIN_SIDE - 1) * sub  # the middle segment holds CROSSOVER_MIN_SIDE grid points too
+    mid = grid.mean()
+    g, c = grid - mid, cands - mid
+    coarse = np.arange(0, n_c, sub)
+    ii, jj = np.meshgrid(coarse, coarse, indexing="ij")
+    keep = jj - ii >= gap
+    ii, jj = ii[keep], jj[keep]
+    sse, _ = _three_segment_sse(yy, g, c, ii, jj)
+    best = np.argmin(sse, axis=1)
+    bi, bj = ii[best], jj[best]  # (B,)
+    d = np.arange(-sub, sub + 1)
+    ri = np.clip(bi[:, None, None] + d[None, :, None], 0, n_c - 1) + 0 * d[None, None, :]
+    rj = np.clip(bj[:, None, None] + d[None, None, :], 0, n_c - 1) + 0 * d[None, :, None]
+    ri, rj = ri.reshape(len(yy), -1), rj.reshape(len(yy), -1)
+    sse, coef = _three_segment_sse(yy, g, c, ri, rj)
+    sse = np.where(rj - ri >= gap, sse, np.inf)
+    k = np.argmin(sse, axis=1)
+    rows = np.arange(len(yy))
+    fi, fj, fc = ri[rows, k], rj[rows, k], coef[rows, k]
+    interior = (fi > 0) & (fj < n_c - 1)
+    b1, b2 = cands[fi[0]], cands[fj[0]]
+    a, s1, d1, d2 = fc[0]
+    slopes = (s1, s1 + d1, s1 + d1 + d2)
+    out["gammas"] = tuple(0.5 * float(v) for v in slopes)
+    out["t_c"], out["t_g"] = float(np.exp(b1)), float(np.exp(b2))
+    out["var_c"] = float(np.exp(a + s1 * (b1 - mid)))
+    out["var_g"] = float(np.exp(a + s1 * (b2 - mid) + d1 * (b2 - b1)))
+    out["n_beyond"] = n_beyond = int((grid > b2 + 1e-9).sum())
+    ok_b = interior[1:]
+    out["n_boot"] = int(ok_b.sum())
+    if ok_b.sum() >= 20:
+        out["t_c_ci"] = tuple(float(v) for v in np.exp(np.percentile(cands[fi[1:][ok_b]], [2.5, 97.5])))
+        out["ci"] = tuple(float(v) for v in np.exp(np.percentile(cands[fj[1:][ok_b]], [2.5, 97.5])))
+    lab = f"⟨{direction.upper()}′²⟩"
+    room = INTERMEDIATE_START * out["t_c"] * 10 ** ((MIN_POINTS - 1) / CROSSOVER_PER_DECADE)
+    low_g = out["ci"][0] if np.isfinite(out["ci"][0]) else out["t_g"]
+    if not interior[0]:
+        end = "first admissible lag" if fi[0] == 0 else "last admissible lag"
+        out["reason"] = (f"the three-segment fit of {lab} puts a breakpoint at the {end} "
+                         f"({np.exp(b1 if fi[0] == 0 else b2):.3g} d/u*): no second bend within "
+                         f"{out['fit_range'][0]:.3g}–{out['fit_range'][1]:.3g} d/u*")
+    elif slopes[0] - slopes[1] < CROSSOVER_MIN_DROP:
+        out["reason"] = (f"the three-segment fit of {lab} has no ballistic-to-intermediate bend at its first breakpoint "
+                         f"({out['t_c']:.3g} d/u*: log–log slope {slopes[0]:.2f} to {slopes[1]:.2f}, a drop below "
+                         f"{CROSSOVER_MIN_DROP})")
+    elif slopes[1] - slopes[2] < GLOBAL_MIN_DROP:
+        out["reason"] = (f"the log–log slope of {lab} changes from {slopes[1]:.2f} to {slopes[2]:.2f} across the second "
+                         f"breakpoint ({out['t_g']:.3g} d/u*): no drop of at least {GLOBAL_MIN_DROP} into a global range")
+    elif n_beyond < GLOBAL_MIN_BEYOND:
+        out["reason"] = (f"the second breakpoint of {lab} ({out['t_g']:.3g} d/u*, slope {slopes[1]:.2f} to {slopes[2]:.2f}) "
+                         f"has {n_beyond} grid point(s) ({n_beyond / CROSSOVER_PER_DECADE:.2f} decade) beyond it; a global "
+                         f"range needs {GLOBAL_MIN_BEYOND} ({GLOBAL_MIN_BEYOND / CROSSOVER_PER_DECADE:.2f} decade): a longer "
+                         "record would show whether there is one")
+    elif low_g < room:
+        which = "the 2.5 % bound of its bootstrap interval" if np.isfinite(out["ci"][0]) else "it"
+        out["reason"] = (f"the second breakpoint of {lab} ({out['t_g']:.3g} d/u*, {which} {low_g:.3g} d/u*) is not "
+                         f"clearly beyond {room:.3g} d/u* = {INTERMEDIATE_START:g} t_c x 10^"
+                         f"{(MIN_POINTS - 1) / CROSSOVER_PER_DECADE:g} (t_c = {out['t_c']:.3g} d/u*): a gradual "
+                         f"ballistic-to-intermediate bend split in two, not an intermediate range of {MIN_POINTS} lags "
+                         "followed by a global one")
+    else:
+        out["found"] = True
+    return out
+
+
 def _auto_ranges(t_first: float, t_max: float, jump_duration: float | None, given: dict,
-                 cross: dict | None = None, jump_given: bool = False) -> tuple[dict, dict, dict]:
+                 cross: dict | None = None, jump_given: bool = False, bend: dict | None = None) -> tuple[dict, dict, dict]:
     """Windows of the ranges (the module docstring's rule), the problems, and per range
     what set its window."""
     ranges, problems, origin = {}, {}, {}
+    second = bend is not None and bend["found"]
     for name in RANGE_NAMES:
         if name in given and given[name] is not None:
             continue
         if jump_given:
             scale, origin[name] = jump_duration, "jump_duration"
+        elif second:
+            scale, origin[name] = bend["t_c"], "crossover"
         elif cross is not None and cross["found"]:
             scale, origin[name] = cross["t_c"], "crossover"
         elif jump_duration is not None:
@@ -338,7 +510,9 @@ def _auto_ranges(t_first: float, t_max: float, jump_duration: float | None, give
         if name == "local":
             ranges[name] = (t_first, LOCAL_FRACTION * scale)
         else:
-            ranges[name] = (INTERMEDIATE_START * scale, t_max)
+            ranges[name] = (INTERMEDIATE_START * scale, bend["t_g"] if second else t_max)
+    if second and given.get(GLOBAL) is None:
+        ranges[GLOBAL], origin[GLOBAL] = (bend["t_g"], t_max), "second bend"
     for name, win in given.items():
         if win is None:
             continue
@@ -352,13 +526,16 @@ def _auto_ranges(t_first: float, t_max: float, jump_duration: float | None, give
 
 def exponents(tracks, ranges=None, *, jump_duration: float | None = None, n_bootstrap: int = N_BOOTSTRAP,
               n_origins: int = 8, seed: int = 0, strict: bool = True) -> DiffusionResult:
-    """γx, γz over the local and intermediate ranges (SPEC §6, §9).
+    """γx, γz over the local and intermediate ranges, and the global range where the curve
+    shows it (SPEC §6, §9).
 
     ``tracks``: a tracks DataFrame (t in d/u*, x, z unwrapped in d) or a run directory.
-    ``ranges``: ``{"local": (t_min, t_max), "intermediate": (t_min, t_max)}`` in d/u*; a
-    range left out is set from ``jump_duration`` (T_J, d/u*) when given, else from the
-    crossover t_c of ⟨X′²⟩ (:func:`crossover`), else from T_J found in the data (the module
-    docstring's rule). ``strict``: raise :class:`AnalysisError` when a range cannot be fitted
+    ``ranges``: ``{"local": (t_min, t_max), "intermediate": (t_min, t_max), "global": …}`` in
+    d/u*; a range left out is set from ``jump_duration`` (T_J, d/u*) when given, else from
+    the crossover t_c of ⟨X′²⟩ (:func:`crossover`), else from T_J found in the data, and
+    the intermediate range ends where the global one begins, at t_g, where
+    :func:`global_bend` finds a second bend (the module docstring's rule). ``n_origins``:
+    time origins of the statistics for tracks (1: from a release at the first origin). ``strict``: raise :class:`AnalysisError` when a range cannot be fitted
     (default); with ``strict=False`` such ranges are left out and ``result.problems`` says why.
     """
     given = dict(ranges or {})
@@ -422,9 +599,14 @@ def exponents(tracks, ranges=None, *, jump_duration: float | None = None, n_boot
     t = curves["t"].to_numpy()
     cross = crossover(t, curves["var_x"].to_numpy(), bx, direction="x")
     cross_z = crossover(t, curves["var_z"].to_numpy(), bz, direction="z")
-    win, problems, origin = _auto_ranges(t_first, t_last, jump_duration, given, cross, jump_given)
-    t_c_row = {"t_c": cross["t_c"] if cross["found"] else float("nan"), "t_c_low": cross["ci"][0],
-               "t_c_high": cross["ci"][1]}
+    bend = global_bend(t, curves["var_x"].to_numpy(), bx, direction="x")
+    win, problems, origin = _auto_ranges(t_first, t_last, jump_duration, given, cross, jump_given, bend)
+    if bend["found"]:
+        t_c_row = {"t_c": bend["t_c"], "t_c_low": bend["t_c_ci"][0], "t_c_high": bend["t_c_ci"][1],
+                   "t_g": bend["t_g"], "t_g_low": bend["ci"][0], "t_g_high": bend["ci"][1]}
+    else:
+        t_c_row = {"t_c": cross["t_c"] if cross["found"] else float("nan"), "t_c_low": cross["ci"][0],
+                   "t_c_high": cross["ci"][1]}
 
     result = DiffusionResult()
     rows = []
@@ -432,7 +614,7 @@ def exponents(tracks, ranges=None, *, jump_duration: float | None = None, n_boot
         sel = (t >= lo * (1 - 1e-9)) & (t <= hi * (1 + 1e-9))
         npts = int(sel.sum())
         if npts < MIN_POINTS:
-            problems[name] = _too_few_points(name, lo, hi, npts, dt, t_last, _basis(origin[name], jump_duration, cross))
+            problems[name] = _too_few_points(name, lo, hi, npts, dt, t_last, _basis(origin[name], jump_duration, bend if bend["found"] else cross))
             continue
         vx, vz = curves["var_x"].to_numpy()[sel], curves["var_z"].to_numpy()[sel]
         if (vx <= 0).any() or (vz <= 0).any():
@@ -466,12 +648,13 @@ def exponents(tracks, ranges=None, *, jump_duration: float | None = None, n_boot
     result["windows_from"] = dict(origin)
     result["crossover"] = cross
     result["crossover_z"] = cross_z
+    result["global_bend"] = bend
     result["jump_duration"] = jump_duration
     result["jump_duration_from"] = jump_from
     result["sample_interval"] = dt
     result["n_particles"] = n_particles
     result["source"] = source
-    result.table = pd.DataFrame(rows, columns=TABLE_COLUMNS)
+    result.table = pd.DataFrame(rows, columns=TABLE_COLUMNS + (GLOBAL_COLUMNS if bend["found"] else []))
     result.curves = curves
     result.problems = problems
     return result
@@ -481,6 +664,8 @@ def _basis(origin: str, jump_duration, cross) -> str:
     """What a window was scaled by, for messages."""
     if origin == "crossover":
         return f", crossover t_c = {cross['t_c']:.3g} d/u*"
+    if origin == "second bend":
+        return f", second bend t_g = {cross['t_g']:.3g} d/u*"
     if origin.startswith("jump_duration") and jump_duration:
         return f", T_J = {jump_duration:.3g} d/u*"
     return ""

@@ -20,7 +20,14 @@ optional — e.g. grains tracked in a flume, or another model's output;
 ``diffusion.read_tracks_file`` explains the columns and the unit options) gives the
 diffusion part: the exponents table, the crossover of the variance curves, the variance
 figure with the fitted ranges and the two-segment fit, in ``<stem>_analysis/`` next to the
-file (or ``--out``).
+file (or ``--out``). ``--origins 1`` takes the statistics from one time origin (a tracer
+release at the first origin) instead of 8 spread over the record.
+
+Where the variance curve bends a second time beyond the intermediate range
+(``diffusion.global_bend``), the **global** range is fitted too and shown beside the others:
+its rows in the tables, its window and fitted line in the variance figure with the
+three-segment fit and t_g, the fit itself in ``global_bend.csv``; otherwise the report
+says why no global range is seen.
 
 Everything lands in ``DIR/analysis`` (or ``--out``): CSV tables, PNG figures, report.html
 (figures embedded as base64, no external files). A range that cannot be fitted appears
@@ -38,8 +45,8 @@ import numpy as np
 import pandas as pd
 
 from . import reference as ref
-from .diffusion import DISCARDED_JUMPS, RANGE_NAMES, TRACK_COLUMNS, exponents, read_tracks_file
-from .variance import AnalysisError
+from .diffusion import ALL_RANGES, DISCARDED_JUMPS, RANGE_NAMES, TRACK_COLUMNS, exponents, read_tracks_file
+from .variance import N_ORIGINS, AnalysisError
 
 JUMP_QUANTITIES = (("length", "L", "d"), ("height", "H", "d"), ("duration", "T", "d/u*"), ("velocity", "U", "u*"))
 
@@ -127,7 +134,11 @@ def case_row(run_dir: Path) -> dict:
     row["t_c"] = cr["t_c"] if cr and cr["found"] else None
     row["t_c_ci"] = f"{cr['ci'][0]:.3g}–{cr['ci'][1]:.3g}" if cr and cr["found"] and np.isfinite(cr["ci"][0]) else None
     row["windows_from"] = "; ".join(f"{k}: {v}" for k, v in res["windows_from"].items()) if res is not None else None
-    for name in RANGE_NAMES:
+    gb = res["global_bend"] if res is not None else None
+    row["t_g"] = gb["t_g"] if gb and gb["found"] else None
+    row["t_g_ci"] = f"{gb['ci'][0]:.3g}–{gb['ci'][1]:.3g}" if gb and gb["found"] and np.isfinite(gb["ci"][0]) else None
+    row["global_range"] = ("seen" if gb["found"] else f"not seen: {gb['reason']}") if gb else None
+    for name in ALL_RANGES:
         for d in ("x", "z"):
             e = res.get(name) if res is not None else None
             row[f"gamma_{name}_{d}"] = e[f"gamma_{d}"] if e else None
@@ -178,7 +189,7 @@ def fig_variance(res, path: Path, title=""):
     c = res.curves
     for ax, d, label in ((axes[0], "x", "⟨X′²⟩"), (axes[1], "z", "⟨Z′²⟩")):
         ax.loglog(c["t"], c[f"var_{d}"], "o", ms=3, color="#555555", label=label)
-        for name, color in (("local", "#cc3311"), ("intermediate", "#0077bb")):
+        for name, color in (("local", "#cc3311"), ("intermediate", "#0077bb"), ("global", "#009944")):
             e = res.get(name)
             if not e:
                 continue
@@ -188,7 +199,10 @@ def fig_variance(res, path: Path, title=""):
             ax.loglog(tt, a * tt ** (2 * g), "-", lw=2, color=color,
                       label=f"{name}: γ{d} = {g:.2f} [{lo:.2f}, {hi:.2f}]")
         cr = res.get("crossover" if d == "x" else "crossover_z")
-        if cr and cr.get("found"):
+        gb = res.get("global_bend") if d == "x" else None
+        if gb and gb.get("found"):
+            _draw_three_segments(ax, gb, "crossover" in res.get("windows_from", {}).values())
+        elif cr and cr.get("found"):
             tc, (lo, hi) = cr["t_c"], cr["ci"]
             for a0, a1, g in ((cr["fit_range"][0], tc, cr["gamma_before"]), (tc, cr["fit_range"][1], cr["gamma_after"])):
                 tt = np.geomspace(a0, a1, 20)
@@ -209,6 +223,23 @@ def fig_variance(res, path: Path, title=""):
         ax.legend(fontsize=8)
     fig.suptitle(title or "displacement variances (Nikora et al. 2002)", fontsize=10)
     return _save(fig, path)
+
+
+def _draw_three_segments(ax, gb: dict, sets: bool):
+    """The three-segment fit of ⟨X′²⟩ (dashed), t_c and t_g with their 95 % intervals."""
+    tc, tg = gb["t_c"], gb["t_g"]
+    g1, g2, g3 = gb["gammas"]
+    for a0, a1, g, ref_t, ref_v in ((gb["fit_range"][0], tc, g1, tc, gb["var_c"]), (tc, tg, g2, tc, gb["var_c"]),
+                                    (tg, gb["fit_range"][1], g3, tg, gb["var_g"])):
+        tt = np.geomspace(a0, a1, 20)
+        ax.loglog(tt, ref_v * (tt / ref_t) ** (2 * g), "--", lw=1, color="k", zorder=3,
+                  label="three-segment fit" if a0 < tc else None)
+    for t0, (lo, hi), name, ls in ((tc, gb["t_c_ci"], "t_c", "-"), (tg, gb["ci"], "t_g", "-.")):
+        if np.isfinite(lo):
+            ax.axvspan(lo, hi, color="#999999", alpha=0.25, lw=0)
+        ci = f" [{lo:.3g}, {hi:.3g}]" if np.isfinite(lo) else ""
+        what = " (sets the ranges)" if sets or name == "t_g" else " (not used)"
+        ax.axvline(t0, color="k", ls=ls, lw=0.8, label=f"{name} = {t0:.3g}{ci} d/u*{what}")
 
 
 def fig_run_costs(summary: dict, path: Path):
@@ -495,22 +526,27 @@ def _validation_section(vdir: Path | None) -> list[str]:
 TRACK_SUFFIXES = (".csv", ".parquet", ".pq")
 
 
-def analyze(path, out=None, validation=None, *, diameter: float = 1.0, time_scale: float = 1.0) -> dict:
+def analyze(path, out=None, validation=None, *, diameter: float = 1.0, time_scale: float = 1.0,
+            n_origins: int = N_ORIGINS) -> dict:
     """Analyse a run directory, a sweep directory or a tracks file (CSV/Parquet);
     returns {"kind" ("run" | "sweep" | "tracks"), "out", "report", "tables": {...}, …}.
-    ``diameter``, ``time_scale``: units of a tracks file (:func:`read_tracks_file`)."""
+    ``diameter``, ``time_scale``: units of a tracks file (:func:`read_tracks_file`); ``n_origins``: its
+    time origins (a run directory's variance.parquet has its own)."""
     path = Path(path)
     if path.is_file():
         if path.suffix.lower() not in TRACK_SUFFIXES:
             raise AnalysisError(f"{path} is a file but not a tracks file (.csv or .parquet with columns "
                                 f"{', '.join(f'{k} ({v})' for k, v in TRACK_COLUMNS.items())})")
-        return analyze_tracks_file(path, Path(out) if out else None, diameter=diameter, time_scale=time_scale)
+        return analyze_tracks_file(path, Path(out) if out else None, diameter=diameter, time_scale=time_scale,
+                                   n_origins=n_origins)
     if not path.is_dir():
         raise AnalysisError(f"{path} is not a directory nor a file: give a run directory (with summary.json), a sweep "
                             f"directory (with cases/NAME/summary.json) or a tracks file (.csv or .parquet with columns "
                             f"particle, t, x, z)")
     if (diameter, time_scale) != (1.0, 1.0):
         raise AnalysisError("diameter / time_scale convert a tracks file's units; a run directory is already in d and d/u*")
+    if n_origins != N_ORIGINS:
+        raise AnalysisError("--origins applies to a tracks file; a run directory's variance.parquet has its own origins")
     out = Path(out) if out else path / "analysis"
     out.mkdir(parents=True, exist_ok=True)
     vdir = _validation_dir(path, validation)
@@ -567,6 +603,18 @@ def crossover_table(res) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
+def global_bend_table(res) -> pd.DataFrame:
+    """The three-segment fit of ⟨X′²⟩ (``diffusion.global_bend``): whether a global range is
+    seen, t_c and t_g (d/u*) with their 95 % bootstrap intervals, the γ of the three
+    segments, the grid points beyond t_g, and why not where none is seen."""
+    b = res["global_bend"]
+    g = b["gammas"] or (None, None, None)
+    return pd.DataFrame([{"direction": b["direction"], "found": bool(b["found"]), "t_c": b["t_c"],
+                          "t_c_low": b["t_c_ci"][0], "t_c_high": b["t_c_ci"][1], "t_g": b["t_g"], "t_g_low": b["ci"][0],
+                          "t_g_high": b["ci"][1], "gamma_1": g[0], "gamma_2": g[1], "gamma_3": g[2],
+                          "n_beyond": b["n_beyond"], "n_boot": b["n_boot"], "note": b["reason"]}])
+
+
 def windows_text(res) -> str:
     """One line: what set the ranges, t_c, and T_J as the cross-check."""
     c = res["crossover"]
@@ -578,7 +626,14 @@ def windows_text(res) -> str:
     tj = (f"T_J = {res['jump_duration']:.3g} d/u* ({res['jump_duration_from']})" if res["jump_duration"]
           else "T_J not known (no jumps.parquet, no bed contacts)")
     frm = "; ".join(f"{k} from {v}" for k, v in res["windows_from"].items())
-    return f"ranges: {frm}. {tc}; {tj}"
+    gb = res.get("global_bend")
+    if gb and gb["found"]:
+        lo, hi = gb["ci"]
+        glob = (f"second bend (three-segment fit) t_c = {gb['t_c']:.3g}, t_g = {gb['t_g']:.3g}"
+                + (f" [{lo:.3g}, {hi:.3g}]" if np.isfinite(lo) else "") + " d/u*: global range from t_g")
+    else:
+        glob = f"no global range seen ({gb['reason']})" if gb else "no global range fitted"
+    return f"ranges: {frm}. {tc}; {glob}; {tj}"
 
 
 def _diffusion_parts(res, problems: dict, out: Path) -> list[str]:
@@ -588,22 +643,29 @@ def _diffusion_parts(res, problems: dict, out: Path) -> list[str]:
         res.curves.to_csv(out / "variance_curves.csv", index=False)
         ct = crossover_table(res)
         ct.to_csv(out / "crossover.csv", index=False)
+        gt = global_bend_table(res)
+        gt.to_csv(out / "global_bend.csv", index=False)
         parts += [_p(f"source {res['source']}, {res['n_particles']} grains; samples every {res['sample_interval']:.3g} "
                      "d/u*; γ from least squares on log–log axes, 95 % bootstrap intervals over grains. The local range "
                      "ends at ½ t_c, the intermediate starts at 3 t_c, t_c being the breakpoint of a two-segment fit of "
-                     "log⟨X′²⟩ against log t (unless ranges or T_J are given; T_J is shown as a cross-check)."),
-                  _p(windows_text(res)), _table(res.table), _p("two-segment fits (breakpoint t_c, d/u*)"), _table(ct)]
+                     "log⟨X′²⟩ against log t (unless ranges or T_J are given; T_J is shown as a cross-check). Where a "
+                     "three-segment fit finds a second bend t_g beyond the intermediate range, the intermediate range "
+                     "ends at t_g (t_c then from the same fit) and the global range runs from t_g to the longest lag."),
+                  _p(windows_text(res)), _table(res.table), _p("two-segment fits (breakpoint t_c, d/u*)"), _table(ct),
+                  _p("three-segment fit of ⟨X′²⟩ (second breakpoint t_g, d/u*: the global range)"), _table(gt)]
         parts.append(_img(fig_variance(res, out / "variance.png")))
     for k, v in problems.items():
         parts.append(_p(f"{k}: {v}", "note"))
     return parts
 
 
-def analyze_tracks_file(path: Path, out: Path | None = None, *, diameter: float = 1.0, time_scale: float = 1.0) -> dict:
+def analyze_tracks_file(path: Path, out: Path | None = None, *, diameter: float = 1.0, time_scale: float = 1.0,
+                        n_origins: int = N_ORIGINS) -> dict:
     """Diffusion of a CSV/Parquet tracks file (no jumps, no summary): exponents, crossover,
-    variance figure and report in ``out`` (default ``<stem>_analysis/`` next to the file)."""
+    variance figure and report in ``out`` (default ``<stem>_analysis/`` next to the file).
+    ``n_origins``: time origins of the statistics (1: a release at the first origin)."""
     frame = read_tracks_file(path, diameter=diameter, time_scale=time_scale)
-    res = exponents(frame, strict=False)  # bad tracks raise; ranges that cannot be fitted are listed
+    res = exponents(frame, strict=False, n_origins=n_origins)  # bad tracks raise; ranges that cannot be fitted are listed
     problems = dict(res.problems)
     out = out if out is not None else path.parent / f"{path.stem}_analysis"
     out.mkdir(parents=True, exist_ok=True)
@@ -616,7 +678,7 @@ def analyze_tracks_file(path: Path, out: Path | None = None, *, diameter: float 
     report = out / "report.html"
     report.write_text(_html(f"saltation tracks {path.name}", [("Diffusion (cf. paper Fig. 8)", parts)]))
     return {"kind": "tracks", "out": out, "report": report, "diffusion": res, "problems": problems,
-            "tables": {"diffusion": res.table, "crossover": crossover_table(res)}}
+            "tables": {"diffusion": res.table, "crossover": crossover_table(res), "global_bend": global_bend_table(res)}}
 
 
 def analyze_sweep(sweep: Path, runs: list[Path], out: Path, vdir=None) -> dict:
