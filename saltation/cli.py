@@ -406,6 +406,55 @@ def _validate(args) -> int:
     return 0
 
 
+def _floats(text, option, count=None):
+    try:
+        vals = [float(x) for x in str(text).split(",") if x.strip()]
+    except ValueError:
+        raise UsageError(f"{option} {text!r}: must be numbers separated by commas") from None
+    if not vals or any(not v > 0 for v in vals) or (count and len(vals) != count):
+        raise UsageError(f"{option} {text!r}: must be {count or 'one or more'} positive numbers separated by commas")
+    return vals
+
+
+def _threshold(args) -> int:
+    from .case.schema import load_case
+    from .studies.threshold import threshold_study
+
+    overrides, given = _set_options(args.set)
+    load_case(args.case, overrides or None)  # a bad case or --set fails now, before any run
+    out = Path(args.out or Path("thresholds") / Path(args.case).stem)
+    _out_dir(out, "--out")
+    kw = {}
+    if args.tau_stars:
+        kw["tau_stars"] = _floats(args.tau_stars, "--tau-stars")
+    if args.ratios:
+        kw["ratios"] = _floats(args.ratios, "--ratios")
+    if args.width:
+        kw["width_d"] = _floats(args.width, "--width", 2)
+    for option in ("duration", "coverage"):
+        v = getattr(args, option)
+        if v is not None and not v > 0:
+            raise UsageError(f"--{option} {v}: must be a positive number")
+    if args.coverage is not None:
+        kw["coverage"] = args.coverage
+    if args.duration is not None:
+        kw["duration_d"] = args.duration
+    res = threshold_study(args.case, out, overrides=overrides, progress=not args.quiet, **kw)
+    print(f"\nd = {1e3 * res['diameter_m']:.3g} mm, D* = {res['d_star']:.3g}; Shields (Soulsby & Whitehouse 1997) "
+          f"theta_cr = {res['shields_soulsby_whitehouse_1997']:.4f}")
+    print(f"{'tau*':>8} {'q*':>10} {'moving %':>9} {'MPM':>9} {'W&P':>9} {'FLvB':>9} {'A-W':>9}")
+    for r in res["table"]:
+        print(f"{r['tau_star']:8.4f} {r['q_star']:10.3g} {100 * r['fraction_moving']:9.3f} "
+              f"{r['Meyer-Peter & Müller 1948']:9.3g} {r['Wong & Parker 2006']:9.3g} "
+              f"{r['Fernandez Luque & van Beek 1976']:9.3g} {r.get('Ackers-White', float('nan')):9.3g}")
+    if res["tau_star_c"] is not None:
+        print(f"tau*_c (q* = 1e-4) = {res['tau_star_c']:.4f}  = {res['tau_star_c_over_shields']:.3f} x Shields")
+    else:
+        print(f"tau*_c not found: {res['tau_star_c_reason']}")
+    print(f"wrote {out}/threshold.json, threshold.csv, threshold.png")
+    return 0
+
+
 def print_validation(res: dict) -> None:
     """The validation table: model mean ± std against each regression (ratio model/regression)."""
     import pandas as pd
@@ -490,6 +539,20 @@ def build_parser() -> argparse.ArgumentParser:
                    help='flow(s) to run: "rough LES" (default first), "smooth LES", "rough log law"; repeat the option; default all three')
     v.add_argument("--no-sensitivity", action="store_true", help="skip the sensitivity table")
     v.set_defaults(func=_validate)
+
+    th = sub.add_parser("threshold", help="incipient motion: resting grains on the packed bed at a series of tau*; "
+                                          "tau*_c where q* = 1e-4, transport rates against bed-load formulas")
+    th.add_argument("case", help="case file (TOML): grain, fluid, flow; bed.model = \"packed\", collisions.model = \"soft\"")
+    th.add_argument("--out", default=None, help="study folder (default thresholds/<case stem>); finished runs are reused")
+    th.add_argument("--set", action="append", metavar="TABLE.KEY=VALUE", help="override a case-file key (repeatable)")
+    th.add_argument("--tau-stars", default=None, help="Shields numbers to run, comma-separated (default: --ratios)")
+    th.add_argument("--ratios", default=None,
+                    help="tau* as multiples of the Shields curve's theta_cr (default 0.4,0.55,0.7,0.85,1,1.2,1.5)")
+    th.add_argument("--width", default=None, help="bed Lx,Lz in d (default 20,12)")
+    th.add_argument("--coverage", type=float, default=None, help="grains at rest per bed sphere (default 0.4; random filling holds ~0.45)")
+    th.add_argument("--duration", type=float, default=None, help="simulated time per tau*, in d/u* (default 200)")
+    th.add_argument("--quiet", action="store_true", help="no progress bars")
+    th.set_defaults(func=_threshold)
 
     flow = sub.add_parser("flow", help="make, ingest and describe LES datasets")
     fsub = flow.add_subparsers(dest="flow_command", required=True)

@@ -71,7 +71,10 @@ under it along a random normal (bed.virtual.virtual_bed_normal, the same counter
 the hard virtual bed) and kept until the contact ends. The first bed contact after at
 least one step off the bed counts as a bed impact and closes a jump (SPEC §6); while the
 contact lasts the next jump's start moves with the grain. Such a grain joins the
-sub-steps no later than the time its bottom can reach the bed top. The other grains get
+sub-steps no later than the time its bottom can reach the bed top. On the packed bed a
+grain that touched the bed in the previous step and whose path reaches it again is
+sub-stepped too (a lasting contact: resting or rolling; with the hard rebound and
+push-out below it would bounce in its hollow at ~g'Δt every step). The other grains get
 the hard-sphere rebound of SPEC §4 in phase 3; a grain ending the step below the bed top
 may be moved by it by up to twice its reach, which the join test adds to its distance
 margin, so that such a move never pushes it into a grain it was not sub-stepped with.
@@ -690,12 +693,13 @@ def _engage(x0w, pos, model, cl, ph, bc):
     be moved by its (hard) bed rebound by up to twice its reach: that margin is added."""
     _margins(x0w, pos, ph.reach, ph.margin)
     _engage_kernel(x0w, pos, cl.grid.box, cl.grid.periodic, cl.nbr, cl.nbr_count, cl.n_touch, bc.in_bed,
-                   bc.slot_id, ph.margin, ph.reach, model.diameter, ph.active, ph.start, cl.order)
+                   bc.slot_id, ph.margin, ph.reach, model.diameter, ph.active, ph.start, cl.order,
+                   bc.last_contact, bc.ints[1], bc.params[0] != 0.0)
 
 
 @njit(cache=True, parallel=True)
 def _engage_kernel(x0w, pos, box, per, nbr, nbr_count, n_touch, in_bed, slot_id, margin, reach, d, active, start,
-                   order):
+                   order, last_contact, step, packed):
     """start[i]: the earliest step fraction s at which grain i can touch a grain or the
     bed on the undeflected paths (inf: not in this step); active[i] = 0 (none started).
     For a pair, |r(s)| ≥ |r₀| − s|Δx_i − Δx_j| − (b_i + b_j) with Δx the step's chord and
@@ -749,7 +753,11 @@ def _engage_kernel(x0w, pos, box, per, nbr, nbr_count, n_touch, in_bed, slot_id,
                 first = 0.0
             elif rel > 0.0:
                 first = min(first, gap / rel)
-        if first > 1.0:
+        # a grain resting or rolling on the packed bed (bed contact in the last step) whose
+        # path reaches the bed again keeps its soft bed contacts: the hard rebound and
+        # push-out would make it bounce in its hollow at ~g'Δt each step (issue 20)
+        lasting = packed and last_contact[i] >= step - 1 and bed_first <= 1.0
+        if first > 1.0 and not lasting:
             start[i] = np.inf  # touches no grain in this step: free flight and the hard bed
         else:
             start[i] = min(first, bed_first)

@@ -284,6 +284,8 @@ class Simulation:
         ckpt = self._read_checkpoint() if self.resume else None
         # the initial state before any file is written: a case that cannot start (no room
         # for its grains at rest) leaves the directory as it was
+        numba.set_num_threads(self.threads())  # before the state: its set-up kernels use the threads
+        threads = numba.get_num_threads()
         new = self._new_state() if ckpt is None else None
         if ckpt is None:
             (self.out / "config.toml").write_text(dump_toml(c))
@@ -292,8 +294,6 @@ class Simulation:
                     shutil.rmtree(stale)
                 elif stale.exists():
                     stale.unlink()
-        numba.set_num_threads(self.threads())
-        threads = numba.get_num_threads()
         meta = ckpt[0] if ckpt else {}
         if ckpt:
             st, ws, rows = ckpt[1], ckpt[2], ckpt[3]
