@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from cases import CASES, REFERENCE, compare, run_case  # noqa: E402
+from cases import CASES, HERE, MACHINE, REFERENCE, compare, run_case  # noqa: E402
 
 HEADLINE = ("/jumps/count", "/jumps/H_mean", "/jumps/L_mean", "/jumps/U_mean", "/jumps/H_std", "/jumps/L_std",
             "/jumps/U_std", "/collisions/particle_particle", "/collisions/bed", "/collisions/overlap/max_over_d",
@@ -47,13 +47,15 @@ def _report(name, got, old):
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--compare", action="store_true", help="report every case against the old reference first")
-    ap.add_argument("--out", default=str(REFERENCE), help="where to write (default: the reference itself)")
+    ap.add_argument("--out", default=str(HERE / "references" / f"{MACHINE}.npz"),
+                    help="where to write (default: this machine's reference, references/<machine>.npz)")
     ap.add_argument("--cases", nargs="+", choices=list(CASES), metavar="NAME",
                     help="re-record only these cases, keep the others' fingerprints from the reference")
     args = ap.parse_args()
     arrays = {}
     if args.cases:
-        with np.load(REFERENCE, allow_pickle=False) as z:
+        keep = Path(args.out) if Path(args.out).exists() else REFERENCE
+        with np.load(keep, allow_pickle=False) as z:
             arrays = {k: z[k] for k in z.files if k.split("|", 1)[0] not in args.cases}
     with tempfile.TemporaryDirectory() as tmp:
         for name in args.cases or CASES:
