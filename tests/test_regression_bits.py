@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parent / "regression"))
-from cases import CASES, REFERENCE, compare, run_case  # noqa: E402
+from cases import CASES, LEGACY_REFERENCE, MACHINE, REFERENCE, STALE, compare, run_case  # noqa: E402
 
 
 def _reference(name):
@@ -22,6 +22,9 @@ def _reference(name):
 
 @pytest.mark.parametrize("name", list(CASES))
 def test_same_bits_as_the_recorded_reference(tmp_path, name):
+    if REFERENCE == LEGACY_REFERENCE and name in STALE:
+        pytest.skip(f"{name}: {STALE[name]}; no reference recorded for this machine ({MACHINE}): "
+                    f"record one with tests/regression/make_reference.py on the pre-change code")
     ref = _reference(name)
     assert ref, f"{name} is not in {REFERENCE}: rerun tests/regression/make_reference.py on the pre-change code"
     got = run_case(name, tmp_path / name)
