@@ -115,9 +115,8 @@ def hexagonal_pockets(lx: float, lz: float) -> np.ndarray:
     ``make_packed_bed(lx, lz)``: the point at distance d from the three bed spheres of a
     triangle (two per bed sphere; y = −1/2 + √(1 − R²) with R the triangle's
     circumradius, √(2/3) − 1/2 = 0.316 d for touching spheres). x and z in the box."""
-    centres, sx, sz = hexagonal_layer(lx, lz)
-    nx = max(1, int(round(lx)))
-    nr = 2 * max(1, int(round(lz / math.sqrt(3.0))))
+    _, sx, sz = hexagonal_layer(lx, lz)
+    nx, nr = int(round(lx / sx)), int(round(lz / sz))  # the layer's spheres per row and rows
     out = []
     for r in range(nr):
         shift = 0.5 * (r % 2)  # row r's offset; row r + 1 has the other one

@@ -73,7 +73,7 @@ def initial_conditions_resting(n: int, pockets, domain_d, seed: int, min_gap: fl
     a random order (PCG64, the case seed) and taken when no grain already placed is closer
     than d (1 + min_gap) (minimum image in x, z; neighbours may touch, as in the second
     layer of a close packing). Raises ValueError when the bed has room for fewer than n
-    such grains (one per bed sphere at most, about 0.6 by random filling)."""
+    such grains (one per bed sphere at most; random filling takes about 0.45–0.7)."""
     lx, lz = domain_d
     pockets = np.asarray(pockets, dtype=np.float64)
     order = np.random.default_rng(seed).permutation(len(pockets))

@@ -183,7 +183,7 @@ def threshold_study(case, out, *, ratios=DEFAULT_RATIOS, tau_stars=None, width_d
     for k, ts in enumerate(series):
         u_star = math.sqrt(ts * R * GRAVITY * d)
         time_scale = d / u_star
-        sets = {"flow.tau_ratio": ts / tau_c_key, "run.start": "rest", "run.n_particles": n,
+        sets = {"run.start": "rest", "run.n_particles": n,
                 "run.domain": [lx * d, lz * d, 50 * d], "run.duration": duration_d * time_scale,
                 "run.name": f"tau_{ts:.5f}", "output.vtk": False, "output.variance": False}
         sets.update(overrides or {})
@@ -244,9 +244,9 @@ def _figure(table, result, stats, path):
     ts = table["tau_star"].to_numpy()
     grid = np.geomspace(ts.min() * 0.9, ts.max() * 1.1, 100)
     a.loglog(ts, np.maximum(table["q_star"], 1e-9), "ko-", label="saltation (resting bed)")
-    for name in FORMULAS:
-        a.loglog(grid, [formula_q_star(t, *FORMULAS[name][:1], FORMULAS[name][1] or result["shields_soulsby_whitehouse_1997"])
-                        for t in grid], "--", label=name)
+    for name, (coef, tau_c) in FORMULAS.items():
+        tau_c = tau_c or result["shields_soulsby_whitehouse_1997"]
+        a.loglog(grid, [formula_q_star(t, coef, tau_c) for t in grid], "--", label=name)
     if "Ackers-White" in table:
         a.loglog(ts, table["Ackers-White"], ":", label="Ackers–White (capacity)")
     a.axhline(Q_STAR_THRESHOLD, color="grey", lw=0.8)
@@ -267,7 +267,8 @@ def _figure(table, result, stats, path):
                 ax.loglog(s, 1.0 - np.arange(len(s)) / len(s), label=f"τ* = {t:.3g}")
         ax.set_xlabel(f"{key.replace('_', ' ')} ({unit})")
         ax.set_ylabel("exceedance")
-        ax.legend(fontsize=7)
+        if ax.get_lines():
+            ax.legend(fontsize=7)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
