@@ -779,9 +779,13 @@ def _block_member(t, lo, hi, app):
 
 
 @njit(cache=True, error_model="numpy", _nrt=False)
-def _forces(cs, st, bc, model, box, per, s, dt, h, update, lo, hi, app, blk):
+def _forces(cs, st, bc, model, box, per, s, dt, h, lo, hi, app, blk):
     """Forces on every active member of block blk (members lo..hi-1 and app..n-1) at s;
-    returns how many touched a member that was not active (to be woken)."""
+    returns how many touched a member that was not active (to be woken). At s = 0 (the
+    set-up) the tangential springs and contact records are not advanced: they hold the
+    previous step's last sub-step. (``update`` is a run-time value, not a compile-time
+    one: one compiled copy of the force code serves both.)"""
+    update = s > 0.0
     woke = 0
     active = cs.active
     for t in range(hi - lo + cs.n[0] - app):
@@ -813,7 +817,7 @@ def _kick_drift_forces(cs, st, bc, model, box, per, s_next, dt, h, lo, hi, app, 
         if dd > dev_max[a]:
             dev_max[a] = dd
         _set_path(cs, a, s_next, dt)
-    return _forces(cs, st, bc, model, box, per, s_next, dt, h, True, lo, hi, app, blk)
+    return _forces(cs, st, bc, model, box, per, s_next, dt, h, lo, hi, app, blk)
 
 
 @njit(cache=True, error_model="numpy", _nrt=False)
@@ -1153,7 +1157,7 @@ def _give_row(cs, a, x0w, st, cl, bc, ph):
 
 
 @njit(cache=True)
-def _wake_up(cs, x0w, st, bc, model, cl, ph, s, dt, h, update, lo, hi, app, blk):
+def _wake_up(cs, x0w, st, bc, model, cl, ph, s, dt, h, lo, hi, app, blk):
     """Activate every member of block blk not active that an active one touches (its
     deviation is exactly zero until now) and give it its forces at this sub-step; repeat
     for the members those touch. Returns the (possibly grown) set."""
@@ -1198,9 +1202,10 @@ def _wake_up(cs, x0w, st, bc, model, cl, ph, s, dt, h, update, lo, hi, app, blk)
             cs.active[b] = 0
             _activate(cs, b, s, dt)
         for t in range(q_hi, q_new):
+            # b alone (as members b..b and none appended): the compiled _forces, not a
+            # second inlined copy of the force code (wake-ups are rare)
             b = cs.queue[t]
-            _grain_force(b, cs, model, box, per, s, dt, h, update, blk)
-            _bed_force(b, cs, st, bc, s, dt, h, update)
+            _forces(cs, st, bc, model, box, per, s, dt, h, b, b + 1, cs.n[0], blk)
         q_lo = q_hi
         q_hi = q_new
     return cs
@@ -1217,8 +1222,8 @@ def _run_block(cs, cand, c0, c1, lo, hi, blk, x0w, st, bc, model, cl, ph, dt, n_
     # set-up: forces at s = 0 of the grains in contact now, without advancing the
     # tangential springs (their state is that of the previous step's last sub-step)
     ptr = _join(cs, cand, c0, c1, 0.0, 0.0, dt)
-    if _forces(cs, st, bc, model, box, per, 0.0, dt, h, False, lo, hi, app, blk) > 0:
-        cs = _wake_up(cs, x0w, st, bc, model, cl, ph, 0.0, dt, h, False, lo, hi, app, blk)
+    if _forces(cs, st, bc, model, box, per, 0.0, dt, h, lo, hi, app, blk) > 0:
+        cs = _wake_up(cs, x0w, st, bc, model, cl, ph, 0.0, dt, h, lo, hi, app, blk)
     for k in range(n_sub):
         s_next = (k + 1) / n_sub
         # grains that may touch something before s_next join now (no force at s_k: they
@@ -1226,7 +1231,7 @@ def _run_block(cs, cand, c0, c1, lo, hi, blk, x0w, st, bc, model, cl, ph, dt, n_
         ptr = _join(cs, cand, ptr, c1, s_next, k / n_sub, dt)
         ph.counters[SUBSTEPPED] += cs.n_act[0] - act0
         if _kick_drift_forces(cs, st, bc, model, box, per, s_next, dt, h, lo, hi, app, blk) > 0:
-            cs = _wake_up(cs, x0w, st, bc, model, cl, ph, s_next, dt, h, True, lo, hi, app, blk)
+            cs = _wake_up(cs, x0w, st, bc, model, cl, ph, s_next, dt, h, lo, hi, app, blk)
         _kick(cs, model, h, lo, hi, app)
     return cs
 
