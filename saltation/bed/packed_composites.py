@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 from numba import njit, prange
 
 from ..contacts.cells import min_image
@@ -218,7 +219,8 @@ def packed_bed_pass(st, w, t, dt, step, bed, pb, last_contact):
     """packed_bed_check_cluster for every grain (in parallel); returns the impulses."""
     n = st.pos.shape[0]
     total = 0
-    for p in prange(n):
+    for q in prange(n):
+        p = np.int64(q)  # one compiled copy (contacts/composites._free_flight)
         if st.status[p] == OK:
             total += packed_bed_check_cluster(st, w, p, t, dt, step, bed, pb, last_contact)
     return total

@@ -248,8 +248,8 @@ def _reach(st, w, cc, dt):
     """D_i (Hermite path bound) and the slerp angle φ_i of every grain; x1 saved.
     (Parallel bodies are separate functions: writes through a NamedTuple's attribute
     directly in a prange body can be lost.)"""
-    for p in prange(st.pos.shape[0]):
-        _reach_one(st, w, cc, p, dt)
+    for q in prange(st.pos.shape[0]):
+        _reach_one(st, w, cc, np.int64(q), dt)  # int64: see _free_flight
 
 
 @njit(cache=True)
@@ -886,7 +886,10 @@ def _clock():
 @njit(cache=True, parallel=True)
 def _free_flight(f, coef, bed, seed, st, w, hc, t, dt, top):
     above_top, pos, status = st.above_top, st.pos, st.status  # writes in a prange body: not through the tuple
-    for p in prange(pos.shape[0]):
+    for q in prange(pos.shape[0]):
+        # a prange index is int64 where the loop is typed and uint64 inside the parallel
+        # kernel: as int64 throughout, step_grain and all it calls compile once, not twice
+        p = np.int64(q)
         if status[p] != OK:
             continue
         step_grain(f, coef, bed, seed, st, w, hc, p, t, dt)

@@ -21,9 +21,11 @@ from __future__ import annotations
 
 import math
 import time
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit, objmode, prange
+from numba.extending import overload
 
 from ..bed.jumps import BED_MIN_JUMP_DURATION, BED_MIN_JUMP_HEIGHT
 from ..bed.packed import make_packed_bed, packed_bed_check_particle
@@ -63,39 +65,129 @@ def _free_flight(f, coef, st, w, hc, t, dt):
         free_flight_particles(f, coef, st, w, hc, c * CHUNK, min(n, (c + 1) * CHUNK), t, dt)
 
 
+# The contact model and the bed are chosen by the *type* of an argument, so that each
+# combination is its own compiled step holding only its own contact phase and bed: a run
+# compiles what it uses and nothing else (the overloads below pick the code at compile time).
+class SoftContacts(NamedTuple):
+    """Soft contacts between grains: the sub-stepped contact phase (contacts/phase.py)."""
+    n_sub: int  # sub-steps per hydrodynamic step
+
+
+class HardContacts(NamedTuple):
+    """Binary hard-sphere impulses (contacts/pairs.py)."""
+    restitution: float
+    friction: float
+
+
+class NoContacts(NamedTuple):
+    """Grains pass through each other."""
+    unused: int = 0  # (a Numba tuple needs a field)
+
+
+class VirtualBed(NamedTuple):
+    """The virtual bed (bed/virtual.py): tilted bed grains drawn per impact."""
+    seed: int
+
+
+class PackedBedPass(NamedTuple):
+    """The packed layer of bed spheres (bed/packed.py)."""
+    unused: int = 0
+
+
+def _choice(arg, choices, name):
+    """The class of a choice argument (a named tuple's type in compiled code)."""
+    cls = getattr(arg, "instance_class", None)
+    if cls not in choices:
+        raise TypeError(f"{name} must be one of {[c.__name__ for c in choices]}, got {arg}")
+    return cls
+
+
+def bed_check(bed_pass, st, w, p, t, dt, step, bed, pb, last_contact):
+    """The bed for grain p, compiled for one kind of ``bed_pass`` at a time (overload below)."""
+    raise NotImplementedError("called from compiled code only")
+
+
+@overload(bed_check, inline="always")
+def _bed_check_of(bed_pass, st, w, p, t, dt, step, bed, pb, last_contact):
+    if _choice(bed_pass, (VirtualBed, PackedBedPass), "bed_pass") is PackedBedPass:
+        def packed(bed_pass, st, w, p, t, dt, step, bed, pb, last_contact):
+            packed_bed_check_particle(st, w, p, t, dt, step, bed, pb, last_contact)
+        return packed
+
+    def virtual(bed_pass, st, w, p, t, dt, step, bed, pb, last_contact):
+        _bed_check_body(st, w, p, t, dt, bed, bed_pass.seed)
+    return virtual
+
+
+def contact_phase(contacts, st, x0w, model, cl, ph, bc, t, step, dt, cs, scratch):
+    """Phase (2) of the step for one kind of ``contacts`` (compiled for one kind at a time,
+    overload below); returns (cl, cs) to keep."""
+    raise NotImplementedError("called from compiled code only")
+
+
+@overload(contact_phase, inline="always")
+def _contact_phase_of(contacts, st, x0w, model, cl, ph, bc, t, step, dt, cs, scratch):
+    kind = _choice(contacts, (SoftContacts, HardContacts, NoContacts), "contacts")
+    if kind is SoftContacts:
+        def soft(contacts, st, x0w, model, cl, ph, bc, t, step, dt, cs, scratch):
+            return soft_contact_phase(st, x0w, model, cl, ph, bc, t, step, dt, contacts.n_sub, cs)
+        return soft
+    if kind is HardContacts:
+        def hard(contacts, st, x0w, model, cl, ph, bc, t, step, dt, cs, scratch):
+            hard_contact_phase(st, cl, contacts.restitution, contacts.friction, scratch)
+            return cl, cs
+        return hard
+
+    def off(contacts, st, x0w, model, cl, ph, bc, t, step, dt, cs, scratch):
+        return cl, cs
+    return off
+
+
+def bed_skip(contacts, active):
+    """The grains whose bed the contact phase resolved, for the bed pass to skip: the
+    sub-stepped ones (``ph.active``) with soft contacts, none otherwise (empty)."""
+    raise NotImplementedError("called from compiled code only")
+
+
+@overload(bed_skip, inline="always")
+def _bed_skip_of(contacts, active):
+    if _choice(contacts, (SoftContacts, HardContacts, NoContacts), "contacts") is SoftContacts:
+        return lambda contacts, active: active
+    return lambda contacts, active: active[:0]
+
+
 @njit(cache=True, error_model="numpy", _nrt=False)
-def _bed_range(st, w, lo, hi, t, dt, step, bed, seed, bed_model, pb, last_contact, top, skip, use_skip):
+def _bed_range(st, w, lo, hi, t, dt, step, bed, bed_pass, pb, last_contact, top, skip, use_skip):
     """The bed for grains lo..hi-1 (one call per chunk: flight.spheres.CHUNK)."""
     for p in range(lo, hi):
         if st.status[p] != OK:
             continue
         if not (use_skip and skip[p] != 0):
-            if bed_model == BED_PACKED:
-                packed_bed_check_particle(st, w, p, t, dt, step, bed, pb, last_contact)
-            else:
-                _bed_check_body(st, w, p, t, dt, bed, seed)
+            bed_check(bed_pass, st, w, p, t, dt, step, bed, pb, last_contact)
         if st.pos[p, 1] > top:
             st.above_top[p] += 1
 
 
 @njit(cache=True, parallel=True)
-def _bed_pass(st, w, t, dt, step, bed, seed, bed_model, pb, last_contact, top, skip):
+def _bed_pass(st, w, t, dt, step, bed, bed_pass, pb, last_contact, top, skip):
     """The bed for every grain not in ``skip`` (grains whose bed contact the soft contact
     phase resolved; ``skip`` empty: none)."""
     n = st.pos.shape[0]
     use_skip = skip.shape[0] == n
     for c in prange((n + CHUNK - 1) // CHUNK):
-        _bed_range(st, w, c * CHUNK, min(n, (c + 1) * CHUNK), t, dt, step, bed, seed, bed_model, pb,
+        _bed_range(st, w, c * CHUNK, min(n, (c + 1) * CHUNK), t, dt, step, bed, bed_pass, pb,
                    last_contact, top, skip, use_skip)
 
 
 @njit(cache=True)
-def advance_split(f, coef, bed, seed, st, w, hc, t0, dt, n_steps, top, step0, contacts_mode, model, cl,
-                  ph, bc, n_sub, restitution, friction, scratch, bed_model, pb, last_contact, timers):
+def advance_split(f, coef, bed, bed_pass, st, w, hc, t0, dt, n_steps, top, step0, contacts, model, cl, ph, bc,
+                  scratch, pb, last_contact, timers):
     """Advance all grains n_steps from t0 (global step index step0): free flight →
     contacts → bed each step (module docstring). Stops early, like tests/peers/sphere_advance.advance,
     when a grain is not finite or a jump buffer is full. Returns (steps done, the
-    ContactList to keep)."""
+    ContactList to keep). ``contacts`` (SoftContacts, HardContacts or NoContacts) and
+    ``bed_pass`` (VirtualBed or PackedBedPass) choose the contact model and the bed by
+    their type: each combination is its own compiled step."""
     n = st.pos.shape[0]
     cap = st.jump_buf.shape[1]
     cs = empty_substep_set()  # the contact phase's compact set, reused from step to step
@@ -110,14 +202,10 @@ def advance_split(f, coef, bed, seed, st, w, hc, t0, dt, n_steps, top, step0, co
                 bad = True
                 break
         if not bad:
-            if contacts_mode == CONTACTS_SOFT:
-                cl, cs = soft_contact_phase(st, w.x0, model, cl, ph, bc, t, step0 + s, dt, n_sub, cs)
-            elif contacts_mode == CONTACTS_HARD:
-                hard_contact_phase(st, cl, restitution, friction, scratch)
+            cl, cs = contact_phase(contacts, st, w.x0, model, cl, ph, bc, t, step0 + s, dt, cs, scratch)
         c2 = _clock()
         if not bad:
-            skip = ph.active if contacts_mode == CONTACTS_SOFT else ph.active[:0]
-            _bed_pass(st, w, t, dt, step0 + s, bed, seed, bed_model, pb, last_contact, top, skip)
+            _bed_pass(st, w, t, dt, step0 + s, bed, bed_pass, pb, last_contact, top, bed_skip(contacts, ph.active))
         c3 = _clock()
         timers[0] += c1 - c0
         timers[1] += c2 - c1
@@ -194,10 +282,13 @@ class Stepper:
     def advance(self, f, st, ws, t0: float, n_steps: int, step0: int) -> int:
         """n_steps steps from t0 (global step index step0); returns the steps done."""
         e, fr = self.case.collisions.restitution, self.case.collisions.friction
+        contacts = {CONTACTS_SOFT: SoftContacts(int(self.n_sub)), CONTACTS_HARD: HardContacts(float(e), float(fr)),
+                    CONTACTS_OFF: NoContacts()}[self.contacts_mode]
+        bed_pass = PackedBedPass() if self.bed_model == BED_PACKED else VirtualBed(int(self.seed))
         done, self.cl = advance_split(
-            f, self.coef, self.bed, self.seed, st, ws, self.hist_coef, float(t0), self.dt, int(n_steps),
-            self.top_d, int(step0), self.contacts_mode, self.model, self.cl, self.ph, self.bc, int(self.n_sub),
-            float(e), float(fr), self.scratch, self.bed_model, self.pb, self.last_contact, self.timers)
+            f, self.coef, self.bed, bed_pass, st, ws, self.hist_coef, float(t0), self.dt, int(n_steps),
+            self.top_d, int(step0), contacts, self.model, self.cl, self.ph, self.bc, self.scratch, self.pb,
+            self.last_contact, self.timers)
         return int(done)
 
     # ---------------------------------------------------------------- statistics

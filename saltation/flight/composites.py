@@ -971,7 +971,8 @@ def advance_clusters(f, coef, bed, seed, st, w, hc, t0, dt, n_steps, top):
     k0 = round(t0 / dt)  # the global index of the first step (t0 is always k0 * dt)
     for s in range(n_steps):
         t = (k0 + s) * dt  # from the global step index: never from where a chunk began
-        for p in prange(n):
+        for q in prange(n):
+            p = np.int64(q)  # one compiled step_grain (contacts/composites._free_flight)
             if st.status[p] != OK:
                 continue
             step_grain(f, coef, bed, seed, st, w, hc, p, t, dt)
