@@ -17,6 +17,7 @@ from ..engine.statistics import DISCARDED_JUMPS
 
 TRACK_COLUMNS = ("particle", "t", "x", "y", "z", "u", "v", "w", "spin_x", "spin_y", "spin_z")
 JUMP_COLUMNS = ("particle", "jump", "t_start", "length", "height", "duration", "velocity", "discarded")
+ROW_GROUP_ROWS = 200_000  # rows per Parquet row group (appended batches are flushed at this size)
 
 # (unit, meaning) of every column a run directory's Parquet files hold: stored in each
 # file's schema (field metadata "unit", "description"), so a script reading the files
@@ -127,7 +128,7 @@ class ParquetTableWriter:
         # copies: callers pass views of live state (st.pos[:, 0]) that the next step changes
         self._pending.append({k: np.array(v, copy=True) for k, v in cols.items()})
         self._pending_rows += n
-        if self._pending_rows >= 200_000:
+        if self._pending_rows >= ROW_GROUP_ROWS:
             self.flush()
 
     def flush(self):
@@ -154,6 +155,8 @@ class ParquetTableWriter:
             self.n_parts += 1
         return self.n_parts
 
+    sort_by: tuple[str, ...] = ()  # columns the finished file is ordered by (none: as appended)
+
     def close(self):
         if self._closed:
             return
@@ -161,16 +164,31 @@ class ParquetTableWriter:
             self.flush()
             self._writer.close()
             self._writer = None
+            if self.sort_by:
+                self._write_sorted([self.path])
         else:
             self.checkpoint()
-            tmp = self.path.with_name(self.path.name + ".tmp")
-            with pq.ParquetWriter(tmp, self.schema) as out:
-                for part in self._part_files():
-                    f = pq.ParquetFile(part)
-                    for g in range(f.num_row_groups):
-                        out.write_table(f.read_row_group(g))
-            tmp.replace(self.path)
+            if self.sort_by:
+                self._write_sorted(self._part_files())
+            else:
+                tmp = self.path.with_name(self.path.name + ".tmp")
+                with pq.ParquetWriter(tmp, self.schema) as out:
+                    for part in self._part_files():
+                        f = pq.ParquetFile(part)
+                        for g in range(f.num_row_groups):
+                            out.write_table(f.read_row_group(g))
+                tmp.replace(self.path)
         self._closed = True
+
+    def _write_sorted(self, sources):
+        """``path`` = the rows of ``sources`` ordered by ``sort_by`` (so that the file does not
+        depend on when rows were appended: output switches and checkpoints move chunk ends)."""
+        table = pa.concat_tables([pq.read_table(f, schema=self.schema) for f in sources])
+        table = table.sort_by([(k, "ascending") for k in self.sort_by])
+        tmp = self.path.with_name(self.path.name + ".tmp")
+        with pq.ParquetWriter(tmp, self.schema) as out:
+            out.write_table(table, row_group_size=ROW_GROUP_ROWS)
+        tmp.replace(self.path)
 
 
 class TrackWriter(ParquetTableWriter):
@@ -221,8 +239,10 @@ class ClusterTrackWriter(ParquetTableWriter):
 
 
 class JumpWriter(ParquetTableWriter):
-    """jumps.parquet: one row per jump (dimensionless: d, d/u*, u*); ``discarded`` marks
-    each grain's first DISCARDED_JUMPS jumps."""
+    """jumps.parquet: one row per jump (dimensionless: d, d/u*, u*), ordered by (particle,
+    jump); ``discarded`` marks each grain's first DISCARDED_JUMPS jumps."""
+
+    sort_by = ("particle", "jump")
 
     def __init__(self, path, **kw):
         super().__init__(path, JUMP_COLUMNS, ["int32", "int32"] + ["float64"] * 5 + ["bool"], **kw)
