@@ -171,7 +171,7 @@ def test_no_pair_missed_across_cells_and_periodic_boundaries(seed):
                 act[i] |= np.linalg.norm(d) < rho[i] + rho[j] + skin
     assert np.array_equal(cc.active.astype(bool), act)
     # forces of the listed contacts = the brute-force springs k_n δ n (grains at rest)
-    ccm.component_forces(st, cc, DT, False)
+    ccm.component_forces(st, cc, DT, 0.0)
     cp = ccm.grain_pose_centres(st)
     grain = np.repeat(np.arange(60), np.diff(st.cstart))
     force = np.zeros((60, 3))

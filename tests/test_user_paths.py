@@ -302,3 +302,13 @@ def test_parquet_files_carry_units_meanings_and_the_discarded_jumps(tmp_path):
     assert res.summary["jumps"]["count"] == int((~j["discarded"]).sum())
     parts = pq.read_schema(tmp_path / "r" / "particles.parquet")
     assert parts.field("x").metadata[b"unit"] == b"d"
+
+
+def test_a_run_too_short_for_any_jump_writes_an_empty_jumps_file_with_its_columns(tmp_path):
+    """A few steps, no jump finished (no part file was ever written): jumps.parquet has
+    no row but every column, with units."""
+    res = run(case(n=4, duration=0.01), out=tmp_path / "r", progress=False)
+    jumps = pq.read_table(tmp_path / "r" / "jumps.parquet")
+    assert jumps.num_rows == 0 and res.summary["jumps"]["recorded"] == 0
+    assert jumps.schema.field("height").metadata[b"unit"] == b"d"
+    assert pd.read_parquet(tmp_path / "r" / "jumps.parquet").columns[:2].tolist() == ["particle", "jump"]

@@ -561,17 +561,20 @@ def _pose_one(st, w, cc, p, s, dt):
 
 
 @njit(cache=True, parallel=True)
-def component_forces(st, cc, h, update):
+def component_forces(st, cc, h, sig):
     """Contact force and torque on every active grain from its component contacts
     (module docstring) at the current poses (cc.P, cc.V, cc.Om, cc.cp); ``h`` the
-    sub-step ξ advances by, ``update`` False for a set-up evaluation (ξ not advanced, only
-    held at the Coulomb limit as every soft contact does; the statistics untouched). Race-free: iteration p writes only grain p's rows."""
+    sub-step ξ advances by, ``sig`` the poses' position σ in the step: σ = 0 is the set-up
+    evaluation (ξ not advanced, only held at the Coulomb limit as every soft contact does;
+    the statistics untouched). Race-free: iteration p writes only grain p's rows."""
     for q in prange(cc.n_act[0]):
-        _grain_force(st, cc, cc.act[q], h, update)
+        _grain_force(st, cc, cc.act[q], h, sig)
 
 
 @njit(cache=True)
-def _grain_force(st, cc, p, h, update):
+def _grain_force(st, cc, p, h, sig):
+    # σ a run-time float (not a literal flag): one compiled copy serves set-up and sub-steps
+    update = sig > 0.0
     kn, kt, zeta, mu = cc.par[0], cc.par[1], cc.par[2], cc.par[3]
     lx, lz = cc.par[5], cc.par[7]
     fx = fy = fz = 0.0
@@ -703,18 +706,18 @@ def _move_ser(st, w, cc, h, half_skin, sig, dt):
 
 
 @njit(cache=True, parallel=True)
-def _force_kick_par(st, cc, h):
+def _force_kick_par(st, cc, h, sig):
     for q in prange(cc.n_act[0]):
         p = cc.act[q]
-        _grain_force(st, cc, p, h, True)
+        _grain_force(st, cc, p, h, sig)
         _kick_one(st, cc, p, 0.5 * h)
 
 
 @njit(cache=True)
-def _force_kick_ser(st, cc, h):
+def _force_kick_ser(st, cc, h, sig):
     for q in range(cc.n_act[0]):
         p = cc.act[q]
-        _grain_force(st, cc, p, h, True)
+        _grain_force(st, cc, p, h, sig)
         _kick_one(st, cc, p, 0.5 * h)
 
 
@@ -857,7 +860,7 @@ def contact_phase(st, w, cc, dt, n_sub):
     cc.counters[ENGAGED] += na
     h = dt / n_sub
     half_skin = 0.5 * cc.par[4]
-    component_forces(st, cc, h, False)
+    component_forces(st, cc, h, 0.0)
     par = na >= PARALLEL_FROM
     for s in range(n_sub):
         sig = (s + 1) / n_sub
@@ -867,9 +870,9 @@ def contact_phase(st, w, cc, dt, n_sub):
             cc.counters[OVERRUNS] += over
             cc = _build_list(st, cc)
         if par:
-            _force_kick_par(st, cc, h)
+            _force_kick_par(st, cc, h, sig)
         else:
-            _force_kick_ser(st, cc, h)
+            _force_kick_ser(st, cc, h, sig)
     cc.counters[SUBSTEPPED] += na * n_sub
     _finish(st, w, cc)
     return cc

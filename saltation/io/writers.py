@@ -183,7 +183,8 @@ class ParquetTableWriter:
     def _write_sorted(self, sources):
         """``path`` = the rows of ``sources`` ordered by ``sort_by`` (so that the file does not
         depend on when rows were appended: output switches and checkpoints move chunk ends)."""
-        table = pa.concat_tables([pq.read_table(f, schema=self.schema) for f in sources])
+        tables = [pq.read_table(f, schema=self.schema) for f in sources]
+        table = pa.concat_tables(tables) if tables else self.schema.empty_table()  # no part: no row
         table = table.sort_by([(k, "ascending") for k in self.sort_by])
         tmp = self.path.with_name(self.path.name + ".tmp")
         with pq.ParquetWriter(tmp, self.schema) as out:
