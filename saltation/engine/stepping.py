@@ -94,6 +94,10 @@ class PackedBedPass(NamedTuple):
     unused: int = 0
 
 
+CONTACT_CHOICES = (SoftContacts, HardContacts, NoContacts)
+BED_CHOICES = (VirtualBed, PackedBedPass)
+
+
 def _choice(arg, choices, name):
     """The class of a choice argument (a named tuple's type in compiled code)."""
     cls = getattr(arg, "instance_class", None)
@@ -109,7 +113,7 @@ def bed_check(bed_pass, st, w, p, t, dt, step, bed, pb, last_contact):
 
 @overload(bed_check, inline="always")
 def _bed_check_of(bed_pass, st, w, p, t, dt, step, bed, pb, last_contact):
-    if _choice(bed_pass, (VirtualBed, PackedBedPass), "bed_pass") is PackedBedPass:
+    if _choice(bed_pass, BED_CHOICES, "bed_pass") is PackedBedPass:
         def packed(bed_pass, st, w, p, t, dt, step, bed, pb, last_contact):
             packed_bed_check_particle(st, w, p, t, dt, step, bed, pb, last_contact)
         return packed
@@ -127,7 +131,7 @@ def contact_phase(contacts, st, x0w, model, cl, ph, bc, t, step, dt, cs, scratch
 
 @overload(contact_phase, inline="always")
 def _contact_phase_of(contacts, st, x0w, model, cl, ph, bc, t, step, dt, cs, scratch):
-    kind = _choice(contacts, (SoftContacts, HardContacts, NoContacts), "contacts")
+    kind = _choice(contacts, CONTACT_CHOICES, "contacts")
     if kind is SoftContacts:
         def soft(contacts, st, x0w, model, cl, ph, bc, t, step, dt, cs, scratch):
             return soft_contact_phase(st, x0w, model, cl, ph, bc, t, step, dt, contacts.n_sub, cs)
@@ -151,7 +155,7 @@ def bed_skip(contacts, active):
 
 @overload(bed_skip, inline="always")
 def _bed_skip_of(contacts, active):
-    if _choice(contacts, (SoftContacts, HardContacts, NoContacts), "contacts") is SoftContacts:
+    if _choice(contacts, CONTACT_CHOICES, "contacts") is SoftContacts:
         return lambda contacts, active: active
     return lambda contacts, active: active[:0]
 
@@ -241,6 +245,11 @@ class Stepper:
         self.bed_model = BED_PACKED if case.bed.model == "packed" else BED_VIRTUAL
         self.model = contact_model_from_case(case)
         self.n_sub = case.contact_substeps if self.contacts_mode == CONTACTS_SOFT else 1
+        # the compiled step's choices (advance_split), fixed for the run
+        self.contacts = {CONTACTS_SOFT: SoftContacts(int(self.n_sub)),
+                         CONTACTS_HARD: HardContacts(float(cc.restitution), float(cc.friction)),
+                         CONTACTS_OFF: NoContacts()}[self.contacts_mode]
+        self.bed_pass = PackedBedPass() if self.bed_model == BED_PACKED else VirtualBed(self.seed)
         skin = getattr(cc, "skin", None)
         self.skin = float(skin) if skin is not None else default_skin(dt)
         height = min(max(self.top_d, LIST_HEIGHT[0]), LIST_HEIGHT[1])
@@ -281,13 +290,9 @@ class Stepper:
 
     def advance(self, f, st, ws, t0: float, n_steps: int, step0: int) -> int:
         """n_steps steps from t0 (global step index step0); returns the steps done."""
-        e, fr = self.case.collisions.restitution, self.case.collisions.friction
-        contacts = {CONTACTS_SOFT: SoftContacts(int(self.n_sub)), CONTACTS_HARD: HardContacts(float(e), float(fr)),
-                    CONTACTS_OFF: NoContacts()}[self.contacts_mode]
-        bed_pass = PackedBedPass() if self.bed_model == BED_PACKED else VirtualBed(int(self.seed))
         done, self.cl = advance_split(
-            f, self.coef, self.bed, bed_pass, st, ws, self.hist_coef, float(t0), self.dt, int(n_steps),
-            self.top_d, int(step0), contacts, self.model, self.cl, self.ph, self.bc, self.scratch, self.pb,
+            f, self.coef, self.bed, self.bed_pass, st, ws, self.hist_coef, float(t0), self.dt, int(n_steps),
+            self.top_d, int(step0), self.contacts, self.model, self.cl, self.ph, self.bc, self.scratch, self.pb,
             self.last_contact, self.timers)
         return int(done)
 
