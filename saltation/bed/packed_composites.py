@@ -40,7 +40,19 @@ import numpy as np
 from numba import njit, prange
 
 from ..contacts.cells import min_image
-from ..flight.composites import OK, _impulse, _lowest, _quat_to_matrix, _rotate_quat, _world_inverse_inertia
+from ..flight.composites import (
+    OK,
+    ClusterState,
+    ClusterStateRef,
+    ClusterWork,
+    ClusterWorkRef,
+    _impulse,
+    _lowest,
+    _quat_to_matrix,
+    _rotate_quat,
+    _world_inverse_inertia,
+)
+from ..grains.refs import as_tuple
 from ..physics.history import history_mark_impact
 from .packed import BED_CENTRE_Y, _nearest_entry, bed_cell, bed_offset, bed_stencil_cell, end_jump
 
@@ -218,11 +230,17 @@ def packed_bed_check_cluster(st, w, p, t, dt, step, bed, pb, last_contact):
 def packed_bed_pass(st, w, t, dt, step, bed, pb, last_contact):
     """packed_bed_check_cluster for every grain (in parallel); returns the impulses."""
     n = st.pos.shape[0]
+    sr, wr = ClusterStateRef(*st), ClusterWorkRef(*w)  # one pointer each into the loop (grains/refs.py)
+    chunk = 16  # grains per parallel chunk, which reads the state as tuples again
     total = 0
-    for q in prange(n):
-        p = np.int64(q)  # one compiled copy (contacts/composites._free_flight)
-        if st.status[p] == OK:
-            total += packed_bed_check_cluster(st, w, p, t, dt, step, bed, pb, last_contact)
+    for c in prange((n + chunk - 1) // chunk):
+        sv, wv = as_tuple(sr, ClusterState), as_tuple(wr, ClusterWork)
+        lo = np.int64(c) * chunk  # int64: one compiled copy (contacts/composites._free_flight)
+        hits = 0
+        for p in range(lo, min(n, lo + chunk)):
+            if sv.status[p] == OK:
+                hits += packed_bed_check_cluster(sv, wv, p, t, dt, step, bed, pb, last_contact)
+        total += hits
     return total
 
 

@@ -102,8 +102,18 @@ from typing import NamedTuple
 
 import numpy as np
 from numba import njit, objmode, prange
+from numba.experimental import structref
 
-from ..flight.composites import OK, _quat_to_matrix, step_grain
+from ..flight.composites import (
+    OK,
+    ClusterState,
+    ClusterStateRef,
+    ClusterWork,
+    ClusterWorkRef,
+    _quat_to_matrix,
+    step_grain,
+)
+from ..grains.refs import FieldsType, as_tuple
 from ..physics.contact_law import spring_dashpot
 from ..physics.history import history_mark_impact
 from .cells import axis_index, grid_shape, min_image, sort_points, stencil_cell
@@ -166,6 +176,43 @@ class ClusterContacts(NamedTuple):
     overlap_sum: np.ndarray  # (N,) Σ overlap over component-contact sub-steps
     contact_substeps: np.ndarray  # (N,) int64 Σ component-contact sub-steps
     counters: np.ndarray  # (N_COUNTERS,) int64
+
+
+@structref.register
+class ClusterContactsRefType(FieldsType):
+    pass
+
+
+class ClusterContactsRef(structref.StructRefProxy):
+    """ClusterContacts' arrays behind one pointer, for the parallel loops (grains/refs.py)."""
+
+
+structref.define_proxy(ClusterContactsRef, ClusterContactsRefType, ClusterContacts._fields)
+
+
+# The parallel kernels take the three tuples as StructRefs (one pointer each, grains/refs.py)
+# and loop over chunks of CHUNK grains; each chunk reads them as tuples again (as_tuple),
+# so that the per-grain functions below see tuples, as the hot loops must.
+CHUNK = 16
+
+
+@njit(cache=True)
+def _refs(st, w, cc):
+    """The three tuples as StructRefs over the same arrays (grains/refs.py)."""
+    return ClusterStateRef(*st), ClusterWorkRef(*w), ClusterContactsRef(*cc)
+
+
+@njit(cache=True, inline="always")
+def _chunk(c, n):
+    """Grains of chunk c of n grains (int64, whatever the prange index's type)."""
+    lo = np.int64(c) * CHUNK
+    return lo, min(n, lo + CHUNK)
+
+
+@njit(cache=True, inline="always")
+def _views(sr, wr, cr):
+    """The three StructRefs as tuples again, for a chunk of grains."""
+    return as_tuple(sr, ClusterState), as_tuple(wr, ClusterWork), as_tuple(cr, ClusterContacts)
 
 
 def point_effective_masses(st, n_dir: int = 200) -> np.ndarray:
@@ -248,8 +295,12 @@ def _reach(st, w, cc, dt):
     """D_i (Hermite path bound) and the slerp angle φ_i of every grain; x1 saved.
     (Parallel bodies are separate functions: writes through a NamedTuple's attribute
     directly in a prange body can be lost.)"""
-    for q in prange(st.pos.shape[0]):
-        _reach_one(st, w, cc, np.int64(q), dt)  # int64: see _free_flight
+    sr, wr, cr = _refs(st, w, cc)
+    n = st.pos.shape[0]
+    for c in prange((n + CHUNK - 1) // CHUNK):
+        sv, wv, cv = _views(sr, wr, cr)
+        for p in range(*_chunk(c, n)):
+            _reach_one(sv, wv, cv, p, dt)
 
 
 @njit(cache=True)
@@ -482,8 +533,12 @@ def _free_momentum(ib, f0, f1, f2, f3, o0, o1, o2):
 def _poses(st, w, cc, s, dt):
     """Pose of every active grain at σ = s on its free path plus deviation, its world
     inverse inertia and its components' world centres."""
-    for q in prange(cc.n_act[0]):
-        _pose_one(st, w, cc, cc.act[q], s, dt)
+    sr, wr, cr = _refs(st, w, cc)
+    n = cc.n_act[0]
+    for c in prange((n + CHUNK - 1) // CHUNK):
+        sv, wv, cv = _views(sr, wr, cr)
+        for q in range(*_chunk(c, n)):
+            _pose_one(sv, wv, cv, cv.act[q], s, dt)
 
 
 @njit(cache=True)
@@ -567,8 +622,12 @@ def component_forces(st, cc, h, sig):
     sub-step ξ advances by, ``sig`` the poses' position σ in the step: σ = 0 is the set-up
     evaluation (ξ not advanced, only held at the Coulomb limit as every soft contact does;
     the statistics untouched). Race-free: iteration p writes only grain p's rows."""
-    for q in prange(cc.n_act[0]):
-        _grain_force(st, cc, cc.act[q], h, sig)
+    sr, cr = ClusterStateRef(*st), ClusterContactsRef(*cc)
+    n = cc.n_act[0]
+    for c in prange((n + CHUNK - 1) // CHUNK):
+        sv, cv = as_tuple(sr, ClusterState), as_tuple(cr, ClusterContacts)
+        for q in range(*_chunk(c, n)):
+            _grain_force(sv, cv, cv.act[q], h, sig)
 
 
 @njit(cache=True)
@@ -690,15 +749,19 @@ def _move_one(st, w, cc, p, h, half_skin, sig, dt):
 
 
 @njit(cache=True, parallel=True)
-def _move_par(st, w, cc, h, half_skin, sig, dt):
-    over = np.zeros(cc.n_act[0], np.int64)
-    for q in prange(cc.n_act[0]):
-        over[q] = _move_one(st, w, cc, cc.act[q], h, half_skin, sig, dt)
+def _move_par(sr, wr, cr, h, half_skin, sig, dt):
+    n = cr.n_act[0]
+    over = np.zeros(n, np.int64)
+    for c in prange((n + CHUNK - 1) // CHUNK):
+        sv, wv, cv = _views(sr, wr, cr)
+        for q in range(*_chunk(c, n)):
+            over[q] = _move_one(sv, wv, cv, cv.act[q], h, half_skin, sig, dt)
     return over.sum()
 
 
 @njit(cache=True)
-def _move_ser(st, w, cc, h, half_skin, sig, dt):
+def _move_ser(sr, wr, cr, h, half_skin, sig, dt):
+    st, w, cc = _views(sr, wr, cr)
     over = 0
     for q in range(cc.n_act[0]):
         over += _move_one(st, w, cc, cc.act[q], h, half_skin, sig, dt)
@@ -706,40 +769,23 @@ def _move_ser(st, w, cc, h, half_skin, sig, dt):
 
 
 @njit(cache=True, parallel=True)
-def _force_kick_par(st, cc, h, sig):
-    for q in prange(cc.n_act[0]):
-        p = cc.act[q]
-        _grain_force(st, cc, p, h, sig)
-        _kick_one(st, cc, p, 0.5 * h)
+def _force_kick_par(sr, cr, h, sig):
+    n = cr.n_act[0]
+    for c in prange((n + CHUNK - 1) // CHUNK):
+        sv, cv = as_tuple(sr, ClusterState), as_tuple(cr, ClusterContacts)
+        for q in range(*_chunk(c, n)):
+            p = cv.act[q]
+            _grain_force(sv, cv, p, h, sig)
+            _kick_one(sv, cv, p, 0.5 * h)
 
 
 @njit(cache=True)
-def _force_kick_ser(st, cc, h, sig):
+def _force_kick_ser(sr, cr, h, sig):
+    st, cc = as_tuple(sr, ClusterState), as_tuple(cr, ClusterContacts)
     for q in range(cc.n_act[0]):
         p = cc.act[q]
         _grain_force(st, cc, p, h, sig)
         _kick_one(st, cc, p, 0.5 * h)
-
-
-@njit(cache=True, parallel=True)
-def _kick(st, cc, k):
-    dv, dL, force, torque, act, mass = cc.dv, cc.dL, cc.force, cc.torque, cc.act, st.mass
-    for q in prange(cc.n_act[0]):
-        p = act[q]
-        inv = k / mass[p]
-        for i in range(3):
-            dv[p, i] += inv * force[p, i]
-            dL[p, i] += k * torque[p, i]
-
-
-@njit(cache=True, parallel=True)
-def _drift(st, cc, h, half_skin):
-    """δx += h δv; δq ← exp(h R_fᵀ δΩ) ⊗ δq with δΩ = I_w⁻¹ δL (current pose). Returns
-    the number of grains whose deviation bound exceeds half the skin."""
-    over = np.zeros(cc.n_act[0], np.int64)
-    for q in prange(cc.n_act[0]):
-        over[q] = _drift_one(st, cc, cc.act[q], h, half_skin)
-    return over.sum()
 
 
 @njit(cache=True)
@@ -771,10 +817,13 @@ def _drift_one(st, cc, p, h, half_skin):
 
 
 @njit(cache=True, parallel=True)
-def _finish(st, w, cc):
+def _finish(sr, wr, cr):
     """End state of the grains that touched another one (module docstring, step 4)."""
-    for q in prange(cc.n_act[0]):
-        _finish_one(st, w, cc, cc.act[q])
+    n = cr.n_act[0]
+    for c in prange((n + CHUNK - 1) // CHUNK):
+        sv, wv, cv = _views(sr, wr, cr)
+        for q in range(*_chunk(c, n)):
+            _finish_one(sv, wv, cv, cv.act[q])
 
 
 @njit(cache=True)
@@ -861,20 +910,22 @@ def contact_phase(st, w, cc, dt, n_sub):
     h = dt / n_sub
     half_skin = 0.5 * cc.par[4]
     component_forces(st, cc, h, 0.0)
+    sr, wr, cr = _refs(st, w, cc)  # the sub-step kernels take one pointer each (grains/refs.py)
     par = na >= PARALLEL_FROM
     for s in range(n_sub):
         sig = (s + 1) / n_sub
         # half kick, drift, pose at σ (one pass); contact forces and the second half kick
-        over = _move_par(st, w, cc, h, half_skin, sig, dt) if par else _move_ser(st, w, cc, h, half_skin, sig, dt)
+        over = _move_par(sr, wr, cr, h, half_skin, sig, dt) if par else _move_ser(sr, wr, cr, h, half_skin, sig, dt)
         if over > 0:
             cc.counters[OVERRUNS] += over
             cc = _build_list(st, cc)
+            cr = ClusterContactsRef(*cc)
         if par:
-            _force_kick_par(st, cc, h, sig)
+            _force_kick_par(sr, cr, h, sig)
         else:
-            _force_kick_ser(st, cc, h, sig)
+            _force_kick_ser(sr, cr, h, sig)
     cc.counters[SUBSTEPPED] += na * n_sub
-    _finish(st, w, cc)
+    _finish(sr, wr, cr)
     return cc
 
 
@@ -889,15 +940,16 @@ def _clock():
 @njit(cache=True, parallel=True)
 def _free_flight(f, coef, bed, seed, st, w, hc, t, dt, top):
     above_top, pos, status = st.above_top, st.pos, st.status  # writes in a prange body: not through the tuple
-    for q in prange(pos.shape[0]):
-        # a prange index is int64 where the loop is typed and uint64 inside the parallel
-        # kernel: as int64 throughout, step_grain and all it calls compile once, not twice
-        p = np.int64(q)
-        if status[p] != OK:
-            continue
-        step_grain(f, coef, bed, seed, st, w, hc, p, t, dt)
-        if pos[p, 1] > top:
-            above_top[p] += 1
+    sr, wr = ClusterStateRef(*st), ClusterWorkRef(*w)  # one pointer each into the loop (grains/refs.py)
+    n = pos.shape[0]
+    for c in prange((n + CHUNK - 1) // CHUNK):
+        sv, wv = as_tuple(sr, ClusterState), as_tuple(wr, ClusterWork)
+        for p in range(*_chunk(c, n)):  # p int64: one compiled step_grain
+            if status[p] != OK:
+                continue
+            step_grain(f, coef, bed, seed, sv, wv, hc, p, t, dt)
+            if pos[p, 1] > top:
+                above_top[p] += 1
 
 
 @njit(cache=True)

@@ -135,7 +135,9 @@ from typing import NamedTuple
 
 import numpy as np
 from numba import njit, prange
+from numba.experimental import structref
 
+from ..grains.refs import FieldsType
 from ..physics.contact_law import lever_torque, sphere_contact_velocity, spring_dashpot
 from .cells import CellGrid, allocate_cells, build_cells, build_neighbour_list, make_grid, min_image, stencil_cells
 
@@ -260,6 +262,18 @@ class ContactList(NamedTuple):
     builds: np.ndarray  # (1,) int64 number of list builds
 
 
+@structref.register
+class ContactListRefType(FieldsType):
+    pass
+
+
+class ContactListRef(structref.StructRefProxy):
+    """ContactList's fields behind one pointer, for the contact phase's kernels (grains/refs.py)."""
+
+
+structref.define_proxy(ContactListRef, ContactListRefType, ContactList._fields)
+
+
 def make_contact_list(pos, box, periodic=(True, False, True), diameter=1.0, skin=0.0,
                       capacity=16) -> ContactList:
     """Cells, neighbour list and empty contact history for grains at ``pos`` (N, 3) in a
@@ -323,7 +337,9 @@ def rebuild(pos, cl):
         spare_touch = np.zeros((n, k), np.uint8)
     else:
         _transfer_history(cl.nbr, cl.nbr_count, cl.shear, cl.touch, nbr2, cnt2, shear2, touch2)
-    cl.ref_pos[:, :] = pos
+    for i in range(n):  # a loop, not ref_pos[:, :] = pos: no shape-error code to compile (~4 s)
+        for a in range(3):
+            cl.ref_pos[i, a] = pos[i, a]
     cl.builds[0] += 1
     return ContactList(g, cl.cutoff, cl.skin, cl.cell_of, cl.cell_start, cl.cell_count, cl.order, cl.ref_pos,
                        nbr2, cnt2, shear2, touch2, spare_nbr, spare_cnt, spare_shear, spare_touch,
@@ -729,7 +745,9 @@ def overlapping_pairs(pos, cl, diameter):
                     continue
                 if m == out.shape[0]:
                     grown = np.empty((2 * m, 2), np.int64)
-                    grown[:m] = out
+                    for k in range(m):  # a loop, not grown[:m] = out: no shape-error code to compile
+                        grown[k, 0] = out[k, 0]
+                        grown[k, 1] = out[k, 1]
                     out = grown
                 out[m, 0] = i
                 out[m, 1] = j
@@ -865,7 +883,8 @@ def _insert_random(n, box, diameter, seed, tries):
             if fill[c] < cap:
                 cells[c, fill[c]] = placed
                 fill[c] += 1
-                pos[placed] = p
+                for a in range(3):  # a loop, not pos[placed] = p: no shape-error code to compile
+                    pos[placed, a] = p[a]
                 placed += 1
     return pos[:placed]
 

@@ -167,15 +167,26 @@ from typing import NamedTuple
 
 import numpy as np
 from numba import njit, prange
+from numba.experimental import structref
 
 from ..bed.jumps import close_jump
 from ..bed.packed import bed_cell, bed_offset, bed_stencil_cell
 from ..bed.virtual import virtual_bed_normal
+from ..flight.spheres import GrainState, GrainStateRef
+from ..grains.refs import FieldsType, as_tuple
 from ..physics.contact_law import lever_torque, sphere_contact_velocity, spring_dashpot
 from ..physics.history import history_mark_impact
 from ..physics.rng import uniform2
 from .cells import build_cells, min_image, stencil_cells
-from .pairs import LEVER_RADIUS, ContactList, hard_sphere_collisions, normal_damping, push_apart, rebuild
+from .pairs import (
+    LEVER_RADIUS,
+    ContactList,
+    ContactListRef,
+    hard_sphere_collisions,
+    normal_damping,
+    push_apart,
+    rebuild,
+)
 
 __all__ = ["ContactPhase", "SubstepSet", "BedContext", "make_contact_phase", "make_bed_context", "soft_contact_phase",
            "empty_substep_set",
@@ -315,11 +326,47 @@ class SubstepSet(NamedTuple):
     jump_c0: np.ndarray  # (C,) int64 copied in (restored if the phase is redone unblocked)
 
 
+# The set travels between kernels as a StructRef (grains/refs.py), made and grown only in
+# compiled code; the sub-step kernels read it as the tuple above (``as_tuple``).
+@structref.register
+class SubstepSetRefType(FieldsType):
+    pass
+
+
+class SubstepSetRef(structref.StructRefProxy):
+    """SubstepSet's arrays behind one pointer (grains/refs.py)."""
+
+
+structref.define_proxy(SubstepSetRef, SubstepSetRefType, SubstepSet._fields)
+
+
+@structref.register
+class ContactPhaseRefType(FieldsType):
+    pass
+
+
+@structref.register
+class BedContextRefType(FieldsType):
+    pass
+
+
+class ContactPhaseRef(structref.StructRefProxy):
+    """ContactPhase's arrays behind one pointer (grains/refs.py)."""
+
+
+class BedContextRef(structref.StructRefProxy):
+    """BedContext's arrays behind one pointer (grains/refs.py)."""
+
+
+structref.define_proxy(ContactPhaseRef, ContactPhaseRefType, ContactPhase._fields)
+structref.define_proxy(BedContextRef, BedContextRefType, BedContext._fields)
+
+
 @njit(cache=True)
 def _make_set(c, r):
     c = max(c, 1)
     r = max(r, 1)
-    return SubstepSet(
+    return SubstepSetRef(
         np.zeros(1, np.int64), np.zeros(1, np.int64), np.zeros(1, np.int64), np.empty(c, np.int64),
         np.empty((c, 18)), np.empty((c, 9)), np.empty((c, 9)), np.empty((c, 6)), np.empty(c), np.empty(c),
         np.empty(c, np.uint8), np.empty(c, np.uint8), np.empty(c, np.uint8), np.empty(c, np.uint8),
@@ -342,7 +389,9 @@ def empty_substep_set():
 def _resized(a, n):
     out = np.empty((n,) + a.shape[1:], a.dtype)
     m = min(n, a.shape[0])
-    out[:m] = a[:m]
+    flat_out, flat_a = out.reshape(-1), a.reshape(-1)  # both C-contiguous
+    for i in range(m * (flat_a.shape[0] // max(a.shape[0], 1))):  # a loop, not out[:m] = a[:m]:
+        flat_out[i] = flat_a[i]  # no shape-error code to compile
     return out
 
 
@@ -353,7 +402,7 @@ def _grow(cs, c, r):
         return cs
     c = max(c, 2 * cs.gid.shape[0]) if c > cs.gid.shape[0] else cs.gid.shape[0]
     r = max(r, 2 * cs.nbr.shape[0]) if r > cs.nbr.shape[0] else cs.nbr.shape[0]
-    return SubstepSet(
+    return SubstepSetRef(
         cs.n, cs.n_rows, cs.n_act, _resized(cs.gid, c), _resized(cs.path, c), _resized(cs.cur, c),
         _resized(cs.dev, c), _resized(cs.ft, c), _resized(cs.dev_max, c), _resized(cs.start, c),
         _resized(cs.active, c), _resized(cs.wake, c), _resized(cs.touched, c), _resized(cs.has_row, c),
@@ -1200,12 +1249,13 @@ def _wake_up(cs, x0w, st, bc, model, cl, ph, s, dt, h, lo, hi, app, blk):
             if cs.has_row[b] == 0:
                 cs = _give_row(cs, b, x0w, st, cl, bc, ph)
             cs.active[b] = 0
-            _activate(cs, b, s, dt)
+            _activate(as_tuple(cs, SubstepSet), b, s, dt)
+        v, sv, bv = as_tuple(cs, SubstepSet), as_tuple(st, GrainState), as_tuple(bc, BedContext)
         for t in range(q_hi, q_new):
             # b alone (as members b..b and none appended): the compiled _forces, not a
             # second inlined copy of the force code (wake-ups are rare)
-            b = cs.queue[t]
-            _forces(cs, st, bc, model, box, per, s, dt, h, b, b + 1, cs.n[0], blk)
+            b = v.queue[t]
+            _forces(v, sv, bv, model, box, per, s, dt, h, b, b + 1, v.n[0], blk)
         q_lo = q_hi
         q_hi = q_new
     return cs
@@ -1219,20 +1269,25 @@ def _run_block(cs, cand, c0, c1, lo, hi, blk, x0w, st, bc, model, cl, ph, dt, n_
     h = dt / n_sub
     app = cs.n[0]
     act0 = cs.n_act[0]
+    # the sub-step kernels read tuples (grains/refs.as_tuple); the set's view is made
+    # again whenever a wake-up may have grown the set
+    v, sv, bv = as_tuple(cs, SubstepSet), as_tuple(st, GrainState), as_tuple(bc, BedContext)
     # set-up: forces at s = 0 of the grains in contact now, without advancing the
     # tangential springs (their state is that of the previous step's last sub-step)
-    ptr = _join(cs, cand, c0, c1, 0.0, 0.0, dt)
-    if _forces(cs, st, bc, model, box, per, 0.0, dt, h, lo, hi, app, blk) > 0:
+    ptr = _join(v, cand, c0, c1, 0.0, 0.0, dt)
+    if _forces(v, sv, bv, model, box, per, 0.0, dt, h, lo, hi, app, blk) > 0:
         cs = _wake_up(cs, x0w, st, bc, model, cl, ph, 0.0, dt, h, lo, hi, app, blk)
+        v = as_tuple(cs, SubstepSet)
     for k in range(n_sub):
         s_next = (k + 1) / n_sub
         # grains that may touch something before s_next join now (no force at s_k: they
         # cannot be touching anything yet)
-        ptr = _join(cs, cand, ptr, c1, s_next, k / n_sub, dt)
-        ph.counters[SUBSTEPPED] += cs.n_act[0] - act0
-        if _kick_drift_forces(cs, st, bc, model, box, per, s_next, dt, h, lo, hi, app, blk) > 0:
+        ptr = _join(v, cand, ptr, c1, s_next, k / n_sub, dt)
+        ph.counters[SUBSTEPPED] += v.n_act[0] - act0
+        if _kick_drift_forces(v, sv, bv, model, box, per, s_next, dt, h, lo, hi, app, blk) > 0:
             cs = _wake_up(cs, x0w, st, bc, model, cl, ph, s_next, dt, h, lo, hi, app, blk)
-        _kick(cs, model, h, lo, hi, app)
+            v = as_tuple(cs, SubstepSet)
+        _kick(v, model, h, lo, hi, app)
     return cs
 
 
@@ -1363,13 +1418,16 @@ def _with_skin(cl, skin):
 
 
 @njit(cache=True)
-def soft_contact_phase(st, x0w, model, cl, ph, bc, t0, step, dt, n_sub, cs):
+def soft_contact_phase(state, x0w, model, cl, phase, bed, t0, step, dt, n_sub, cs):
     """Phase 2 of the module docstring for all grains: the free flight (x₀ in ``x0w``
-    (N, 9) = w.x0, x₁ in ``st``) of step ``step`` (from t0) corrected by soft contacts
+    (N, 9) = w.x0, x₁ in ``state``, a GrainState; ``phase`` a ContactPhase, ``bed`` a
+    BedContext) of step ``step`` (from t0) corrected by soft contacts
     with grains and the bed in ``n_sub`` sub-steps. ``ph.active`` says afterwards which
     grains were sub-stepped (their bed is done; the bed pass must skip them). ``cs``: the
     SubstepSet the previous phase returned (or ``empty_substep_set()``), reused. Returns
     the ContactList to keep (it may have been rebuilt) and the set to pass next time."""
+    # one pointer each for the state tuples in every kernel below (grains/refs.py)
+    st, ph, bc = GrainStateRef(*state), ContactPhaseRef(*phase), BedContextRef(*bed)
     pos, vel = st.pos, st.vel
     bc.t0[0] = t0
     bc.ints[1] = step
@@ -1397,7 +1455,8 @@ def soft_contact_phase(st, x0w, model, cl, ph, bc, t0, step, dt, n_sub, cs):
             for i in range(n):
                 if ph.reach[i] > skin_half:  # still too fast: a contact might be missed
                     ph.counters[OVERRUNS] += 1
-    _engage(x0w, pos, model, cl, ph, bc)
+    lst = ContactListRef(*cl)  # the list (fixed from here on) as one pointer (grains/refs.py)
+    _engage(x0w, pos, model, lst, ph, bc)
     ph.n_act[0] = 0
     n_cand = 0
     for i in range(n):
@@ -1409,17 +1468,17 @@ def soft_contact_phase(st, x0w, model, cl, ph, bc, t0, step, dt, n_sub, cs):
     # docstring, "Memory layout"), block by block ("Blocks"); candidates join by the
     # time they may first touch something (docstring: who is sub-stepped)
     d = model.diameter
-    box, per = cl.grid.box, cl.grid.periodic
+    box, per = lst.grid.box, lst.grid.periodic
     wakes0, done0 = ph.counters[WAKES], ph.counters[SUBSTEPPED]
     forced = np.empty(0, np.int64)  # groups joined after a failed pass (_conflicts)
     passes = 0
     while True:
-        cs, cand, cstart, mstart, new = _gather(x0w, st, cl, bc, ph, dt, d, passes <= MERGED_PASSES, forced, cs)
+        cs, cand, cstart, mstart, new = _gather(x0w, st, lst, bc, ph, dt, d, passes <= MERGED_PASSES, forced, cs)
         n_blocks = mstart.shape[0] - 1
         for b in range(n_blocks):
             if cstart[b + 1] > cstart[b]:
                 cs = _run_block(cs, cand, cstart[b], cstart[b + 1], mstart[b], mstart[b + 1], b, x0w, st, bc,
-                                model, cl, ph, dt, n_sub)
+                                model, lst, ph, dt, n_sub)
         ph.counters[BLOCKS] += n_blocks
         if n_blocks == 1:
             break
@@ -1434,7 +1493,7 @@ def soft_contact_phase(st, x0w, model, cl, ph, bc, t0, step, dt, n_sub, cs):
         _release(cs, st, ph)
         ph.counters[WAKES] = wakes0
         ph.counters[SUBSTEPPED] = done0
-    over = _scatter(cs, st, cl, bc, ph, skin_half)
+    over = _scatter(cs, st, lst, bc, ph, skin_half)
     if over > 0:
         # a grain may have left the list's reach: look for pairs in contact now that the
         # list does not hold (an actual miss), with fresh cells

@@ -25,7 +25,6 @@ from typing import NamedTuple
 
 import numpy as np
 from numba import njit, objmode, prange
-from numba.extending import overload
 
 from ..bed.jumps import BED_MIN_JUMP_DURATION, BED_MIN_JUMP_HEIGHT
 from ..bed.packed import make_packed_bed, packed_bed_check_particle
@@ -39,7 +38,17 @@ from ..contacts.phase import (
     make_contact_phase,
     soft_contact_phase,
 )
-from ..flight.spheres import CHUNK, OK, _bed_check_body, free_flight_particles  # the inline bed body
+from ..flight.spheres import (  # the inline bed body
+    CHUNK,
+    OK,
+    GrainState,
+    GrainStateRef,
+    Workspace,
+    WorkspaceRef,
+    _bed_check_body,
+    free_flight_particles,
+)
+from ..grains.refs import as_tuple
 
 CONTACTS_OFF, CONTACTS_SOFT, CONTACTS_HARD = 0, 1, 2
 BED_VIRTUAL, BED_PACKED = 0, 1
@@ -61,13 +70,17 @@ def _clock():
 @njit(cache=True, parallel=True)
 def _free_flight(f, coef, st, w, hc, t, dt):
     n = st.pos.shape[0]
+    # one pointer each into the loop, a tuple again per chunk for the hot loop (grains/refs.py)
+    sr, wr = GrainStateRef(*st), WorkspaceRef(*w)
     for c in prange((n + CHUNK - 1) // CHUNK):
-        free_flight_particles(f, coef, st, w, hc, c * CHUNK, min(n, (c + 1) * CHUNK), t, dt)
+        free_flight_particles(f, coef, as_tuple(sr, GrainState), as_tuple(wr, Workspace), hc, c * CHUNK,
+                              min(n, (c + 1) * CHUNK), t, dt)
 
 
-# The contact model and the bed are chosen by the *type* of an argument, so that each
-# combination is its own compiled step holding only its own contact phase and bed: a run
-# compiles what it uses and nothing else (the overloads below pick the code at compile time).
+# The contact model and the bed are chosen by which arguments are None: Numba prunes a
+# branch ``if x is not None`` on an argument that is None before it types the code, so each
+# combination is its own compiled step holding only its own contact phase and bed, and a
+# run compiles what it uses and nothing else.
 class SoftContacts(NamedTuple):
     """Soft contacts between grains: the sub-stepped contact phase (contacts/phase.py)."""
     n_sub: int  # sub-steps per hydrodynamic step
@@ -79,11 +92,6 @@ class HardContacts(NamedTuple):
     friction: float
 
 
-class NoContacts(NamedTuple):
-    """Grains pass through each other."""
-    unused: int = 0  # (a Numba tuple needs a field)
-
-
 class VirtualBed(NamedTuple):
     """The virtual bed (bed/virtual.py): tilted bed grains drawn per impact."""
     seed: int
@@ -91,110 +99,53 @@ class VirtualBed(NamedTuple):
 
 class PackedBedPass(NamedTuple):
     """The packed layer of bed spheres (bed/packed.py)."""
-    unused: int = 0
-
-
-CONTACT_CHOICES = (SoftContacts, HardContacts, NoContacts)
-BED_CHOICES = (VirtualBed, PackedBedPass)
-
-
-def _choice(arg, choices, name):
-    """The class of a choice argument (a named tuple's type in compiled code)."""
-    cls = getattr(arg, "instance_class", None)
-    if cls not in choices:
-        raise TypeError(f"{name} must be one of {[c.__name__ for c in choices]}, got {arg}")
-    return cls
-
-
-def bed_check(bed_pass, st, w, p, t, dt, step, bed, pb, last_contact):
-    """The bed for grain p, compiled for one kind of ``bed_pass`` at a time (overload below)."""
-    raise NotImplementedError("called from compiled code only")
-
-
-@overload(bed_check, inline="always")
-def _bed_check_of(bed_pass, st, w, p, t, dt, step, bed, pb, last_contact):
-    if _choice(bed_pass, BED_CHOICES, "bed_pass") is PackedBedPass:
-        def packed(bed_pass, st, w, p, t, dt, step, bed, pb, last_contact):
-            packed_bed_check_particle(st, w, p, t, dt, step, bed, pb, last_contact)
-        return packed
-
-    def virtual(bed_pass, st, w, p, t, dt, step, bed, pb, last_contact):
-        _bed_check_body(st, w, p, t, dt, bed, bed_pass.seed)
-    return virtual
-
-
-def contact_phase(contacts, st, x0w, model, cl, ph, bc, t, step, dt, cs, scratch):
-    """Phase (2) of the step for one kind of ``contacts`` (compiled for one kind at a time,
-    overload below); returns (cl, cs) to keep."""
-    raise NotImplementedError("called from compiled code only")
-
-
-@overload(contact_phase, inline="always")
-def _contact_phase_of(contacts, st, x0w, model, cl, ph, bc, t, step, dt, cs, scratch):
-    kind = _choice(contacts, CONTACT_CHOICES, "contacts")
-    if kind is SoftContacts:
-        def soft(contacts, st, x0w, model, cl, ph, bc, t, step, dt, cs, scratch):
-            return soft_contact_phase(st, x0w, model, cl, ph, bc, t, step, dt, contacts.n_sub, cs)
-        return soft
-    if kind is HardContacts:
-        def hard(contacts, st, x0w, model, cl, ph, bc, t, step, dt, cs, scratch):
-            hard_contact_phase(st, cl, contacts.restitution, contacts.friction, scratch)
-            return cl, cs
-        return hard
-
-    def off(contacts, st, x0w, model, cl, ph, bc, t, step, dt, cs, scratch):
-        return cl, cs
-    return off
-
-
-def bed_skip(contacts, active):
-    """The grains whose bed the contact phase resolved, for the bed pass to skip: the
-    sub-stepped ones (``ph.active``) with soft contacts, none otherwise (empty)."""
-    raise NotImplementedError("called from compiled code only")
-
-
-@overload(bed_skip, inline="always")
-def _bed_skip_of(contacts, active):
-    if _choice(contacts, CONTACT_CHOICES, "contacts") is SoftContacts:
-        return lambda contacts, active: active
-    return lambda contacts, active: active[:0]
+    unused: int = 0  # (a Numba tuple needs a field)
 
 
 @njit(cache=True, error_model="numpy", _nrt=False)
-def _bed_range(st, w, lo, hi, t, dt, step, bed, bed_pass, pb, last_contact, top, skip, use_skip):
-    """The bed for grains lo..hi-1 (one call per chunk: flight.spheres.CHUNK)."""
+def _bed_range(st, w, lo, hi, t, dt, step, bed, virtual, packed, pb, last_contact, top, skip, use_skip):
+    """The bed for grains lo..hi-1 (one call per chunk: flight.spheres.CHUNK); one of
+    ``virtual`` (VirtualBed) and ``packed`` (PackedBedPass) is given, the other None."""
     for p in range(lo, hi):
         if st.status[p] != OK:
             continue
         if not (use_skip and skip[p] != 0):
-            bed_check(bed_pass, st, w, p, t, dt, step, bed, pb, last_contact)
+            if virtual is not None:
+                _bed_check_body(st, w, p, t, dt, bed, virtual.seed)
+            if packed is not None:
+                packed_bed_check_particle(st, w, p, t, dt, step, bed, pb, last_contact)
         if st.pos[p, 1] > top:
             st.above_top[p] += 1
 
 
 @njit(cache=True, parallel=True)
-def _bed_pass(st, w, t, dt, step, bed, bed_pass, pb, last_contact, top, skip):
+def _bed_pass(st, w, t, dt, step, bed, virtual, packed, pb, last_contact, top, skip):
     """The bed for every grain not in ``skip`` (grains whose bed contact the soft contact
     phase resolved; ``skip`` empty: none)."""
     n = st.pos.shape[0]
     use_skip = skip.shape[0] == n
+    sr, wr = GrainStateRef(*st), WorkspaceRef(*w)  # as in _free_flight
     for c in prange((n + CHUNK - 1) // CHUNK):
-        _bed_range(st, w, c * CHUNK, min(n, (c + 1) * CHUNK), t, dt, step, bed, bed_pass, pb,
-                   last_contact, top, skip, use_skip)
+        _bed_range(as_tuple(sr, GrainState), as_tuple(wr, Workspace), c * CHUNK, min(n, (c + 1) * CHUNK), t, dt,
+                   step, bed, virtual, packed, pb, last_contact, top, skip, use_skip)
 
 
 @njit(cache=True)
-def advance_split(f, coef, bed, bed_pass, st, w, hc, t0, dt, n_steps, top, step0, contacts, model, cl, ph, bc,
-                  scratch, pb, last_contact, timers):
+def advance_split(f, coef, bed, virtual, packed, st, w, hc, t0, dt, n_steps, top, step0, soft, hard, model, cl, ph,
+                  bc, scratch, pb, last_contact, timers):
     """Advance all grains n_steps from t0 (global step index step0): free flight →
     contacts → bed each step (module docstring). Stops early, like tests/peers/sphere_advance.advance,
     when a grain is not finite or a jump buffer is full. Returns (steps done, the
-    ContactList to keep). ``contacts`` (SoftContacts, HardContacts or NoContacts) and
-    ``bed_pass`` (VirtualBed or PackedBedPass) choose the contact model and the bed by
-    their type: each combination is its own compiled step."""
+    ContactList to keep). The contact model is ``soft`` (SoftContacts), ``hard``
+    (HardContacts) or neither (both None: grains pass through each other); the bed is
+    ``virtual`` (VirtualBed) or ``packed`` (PackedBedPass), the other None. Each
+    combination is its own compiled step (the branches on None are pruned)."""
     n = st.pos.shape[0]
     cap = st.jump_buf.shape[1]
     cs = empty_substep_set()  # the contact phase's compact set, reused from step to step
+    skip = ph.active[:0]  # grains whose bed the contact phase resolved: none ...
+    if soft is not None:
+        skip = ph.active  # ... or the sub-stepped ones
     for s in range(n_steps):
         t = (step0 + s) * dt  # from the global step index: never from where a chunk began
         c0 = _clock()
@@ -205,11 +156,13 @@ def advance_split(f, coef, bed, bed_pass, st, w, hc, t0, dt, n_steps, top, step0
             if st.status[p] != OK:
                 bad = True
                 break
-        if not bad:
-            cl, cs = contact_phase(contacts, st, w.x0, model, cl, ph, bc, t, step0 + s, dt, cs, scratch)
+        if not bad and soft is not None:
+            cl, cs = soft_contact_phase(st, w.x0, model, cl, ph, bc, t, step0 + s, dt, soft.n_sub, cs)
+        if not bad and hard is not None:
+            hard_contact_phase(st, cl, hard.restitution, hard.friction, scratch)
         c2 = _clock()
         if not bad:
-            _bed_pass(st, w, t, dt, step0 + s, bed, bed_pass, pb, last_contact, top, bed_skip(contacts, ph.active))
+            _bed_pass(st, w, t, dt, step0 + s, bed, virtual, packed, pb, last_contact, top, skip)
         c3 = _clock()
         timers[0] += c1 - c0
         timers[1] += c2 - c1
@@ -246,10 +199,11 @@ class Stepper:
         self.model = contact_model_from_case(case)
         self.n_sub = case.contact_substeps if self.contacts_mode == CONTACTS_SOFT else 1
         # the compiled step's choices (advance_split), fixed for the run
-        self.contacts = {CONTACTS_SOFT: SoftContacts(int(self.n_sub)),
-                         CONTACTS_HARD: HardContacts(float(cc.restitution), float(cc.friction)),
-                         CONTACTS_OFF: NoContacts()}[self.contacts_mode]
-        self.bed_pass = PackedBedPass() if self.bed_model == BED_PACKED else VirtualBed(self.seed)
+        self.soft = SoftContacts(int(self.n_sub)) if self.contacts_mode == CONTACTS_SOFT else None
+        self.hard = (HardContacts(float(cc.restitution), float(cc.friction))
+                     if self.contacts_mode == CONTACTS_HARD else None)
+        self.virtual = VirtualBed(self.seed) if self.bed_model == BED_VIRTUAL else None
+        self.packed = PackedBedPass() if self.bed_model == BED_PACKED else None
         skin = getattr(cc, "skin", None)
         self.skin = float(skin) if skin is not None else default_skin(dt)
         height = min(max(self.top_d, LIST_HEIGHT[0]), LIST_HEIGHT[1])
@@ -291,8 +245,8 @@ class Stepper:
     def advance(self, f, st, ws, t0: float, n_steps: int, step0: int) -> int:
         """n_steps steps from t0 (global step index step0); returns the steps done."""
         done, self.cl = advance_split(
-            f, self.coef, self.bed, self.bed_pass, st, ws, self.hist_coef, float(t0), self.dt, int(n_steps),
-            self.top_d, int(step0), self.contacts, self.model, self.cl, self.ph, self.bc, self.scratch, self.pb,
+            f, self.coef, self.bed, self.virtual, self.packed, st, ws, self.hist_coef, float(t0), self.dt,
+            int(n_steps), self.top_d, int(step0), self.soft, self.hard, self.model, self.cl, self.ph, self.bc, self.scratch, self.pb,
             self.last_contact, self.timers)
         return int(done)
 

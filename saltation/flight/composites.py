@@ -98,11 +98,13 @@ from typing import NamedTuple
 
 import numpy as np
 from numba import njit, prange
+from numba.experimental import structref
 
 from flowfields.sampler import ABOVE_TOP, sample_column, sample_point, vorticity_from_gradient
 
 from ..bed.jumps import BED_MIN_JUMP_DURATION, BED_MIN_JUMP_HEIGHT, close_jump
 from ..bed.virtual import BED_MODEL, virtual_bed_normal
+from ..grains.refs import FieldsType, as_tuple
 from ..grains.status import JUMP_FIELDS, NOT_FINITE, OK
 from ..physics import history
 from ..physics.forces import (
@@ -194,6 +196,30 @@ class ClusterWork(NamedTuple):
     ft: np.ndarray  # (N,6) force, torque (world), then body, then accelerations
     aug: np.ndarray  # (N,6,7) 6×6 solve
     vec: np.ndarray  # (N,12) scratch vectors
+
+
+# The two tuples above as one pointer each, for kernels that hand them to parallel loops
+# (grains/refs.py): ``ClusterStateRef(*st)``, ``ClusterWorkRef(*w)``.
+@structref.register
+class ClusterStateRefType(FieldsType):
+    pass
+
+
+@structref.register
+class ClusterWorkRefType(FieldsType):
+    pass
+
+
+class ClusterStateRef(structref.StructRefProxy):
+    """ClusterState's arrays behind one pointer (grains/refs.py)."""
+
+
+class ClusterWorkRef(structref.StructRefProxy):
+    """ClusterWork's arrays behind one pointer (grains/refs.py)."""
+
+
+structref.define_proxy(ClusterStateRef, ClusterStateRefType, ClusterState._fields)
+structref.define_proxy(ClusterWorkRef, ClusterWorkRefType, ClusterWork._fields)
 
 
 # --------------------------------------------------------------------- set-up (Python)
@@ -969,15 +995,19 @@ def advance_clusters(f, coef, bed, seed, st, w, hc, t0, dt, n_steps, top):
     n = st.pos.shape[0]
     cap = st.jump_buf.shape[1]
     k0 = round(t0 / dt)  # the global index of the first step (t0 is always k0 * dt)
+    sr, wr = ClusterStateRef(*st), ClusterWorkRef(*w)  # one pointer each into the loop (grains/refs.py)
+    chunk = 16  # grains per parallel chunk, which reads the state as tuples again
     for s in range(n_steps):
         t = (k0 + s) * dt  # from the global step index: never from where a chunk began
-        for q in prange(n):
-            p = np.int64(q)  # one compiled step_grain (contacts/composites._free_flight)
-            if st.status[p] != OK:
-                continue
-            step_grain(f, coef, bed, seed, st, w, hc, p, t, dt)
-            if st.pos[p, 1] > top:
-                st.above_top[p] += 1
+        for c in prange((n + chunk - 1) // chunk):
+            sv, wv = as_tuple(sr, ClusterState), as_tuple(wr, ClusterWork)
+            lo = np.int64(c) * chunk  # int64: one compiled step_grain (contacts/composites._free_flight)
+            for p in range(lo, min(n, lo + chunk)):
+                if sv.status[p] != OK:
+                    continue
+                step_grain(f, coef, bed, seed, sv, wv, hc, p, t, dt)
+                if sv.pos[p, 1] > top:
+                    sv.above_top[p] += 1
         stop = False
         for p in range(n):
             if st.status[p] != OK or st.jump_buf_n[p] >= cap:

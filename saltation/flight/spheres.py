@@ -25,9 +25,11 @@ from typing import NamedTuple
 
 import numpy as np
 from numba import njit
+from numba.experimental import structref
 
 from ..bed.jumps import BED_MIN_JUMP_DURATION, BED_MIN_JUMP_HEIGHT, close_jump
 from ..bed.virtual import bed_rebound, virtual_bed_normal
+from ..grains.refs import FieldsType
 from ..grains.status import JUMP_FIELDS, NOT_FINITE, OK
 from ..physics import history
 from ..physics.fluid import fluid_at_grain, gather_at, grain_velocity, locate_grain, same_cell
@@ -95,6 +97,30 @@ class Workspace(NamedTuple):
     normal: np.ndarray  # (N,3) bed contact normal
     basset: np.ndarray  # (N,3) history acceleration −P·I_n held over the step
     slip: np.ndarray  # (N,3) slip velocity at a history reset
+
+
+# The two tuples above as one pointer each, for kernels that hand them to parallel loops
+# (grains/refs.py): ``GrainStateRef(*st)``, ``WorkspaceRef(*w)``.
+@structref.register
+class GrainStateRefType(FieldsType):
+    pass
+
+
+@structref.register
+class WorkspaceRefType(FieldsType):
+    pass
+
+
+class GrainStateRef(structref.StructRefProxy):
+    """GrainState's arrays behind one pointer (grains/refs.py)."""
+
+
+class WorkspaceRef(structref.StructRefProxy):
+    """Workspace's arrays behind one pointer (grains/refs.py)."""
+
+
+structref.define_proxy(GrainStateRef, GrainStateRefType, GrainState._fields)
+structref.define_proxy(WorkspaceRef, WorkspaceRefType, Workspace._fields)
 
 
 def make_workspace(n: int) -> Workspace:

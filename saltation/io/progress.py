@@ -25,9 +25,9 @@ def progress_bar(total: int, *, desc: str, enabled: bool, initial: int = 0):
 
 # Cold compile of a run's kernels with an empty cache on the 2-core development machine,
 # `benchmarks/bench_compile.py` (its compile_s, two benchmarks sharing the machine):
-# spheres 172 s (cases/default.toml: the LES, soft contacts, virtual bed), composites 206 s
+# spheres 105 s (cases/default.toml: the LES, soft contacts, virtual bed), composites 140 s
 # (the same with particle.shape = "mixture").
-COMPILE_ESTIMATE_S = {"spheres": 180.0, "composites": 210.0}
+COMPILE_ESTIMATE_S = {"spheres": 110.0, "composites": 145.0}
 COMPILE_HEARTBEAT_S = 30.0  # a line this often while the compiler works
 
 
