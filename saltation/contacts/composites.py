@@ -102,7 +102,6 @@ from typing import NamedTuple
 
 import numpy as np
 from numba import njit, objmode, prange
-from numba.experimental import structref
 
 from ..flight.composites import (
     OK,
@@ -113,7 +112,7 @@ from ..flight.composites import (
     _quat_to_matrix,
     step_grain,
 )
-from ..grains.refs import FieldsType, as_tuple
+from ..grains.refs import as_tuple, struct_ref
 from ..physics.contact_law import spring_dashpot
 from ..physics.history import history_mark_impact
 from .cells import axis_index, grid_shape, min_image, sort_points, stencil_cell
@@ -178,16 +177,7 @@ class ClusterContacts(NamedTuple):
     counters: np.ndarray  # (N_COUNTERS,) int64
 
 
-@structref.register
-class ClusterContactsRefType(FieldsType):
-    pass
-
-
-class ClusterContactsRef(structref.StructRefProxy):
-    """ClusterContacts' arrays behind one pointer, for the parallel loops (grains/refs.py)."""
-
-
-structref.define_proxy(ClusterContactsRef, ClusterContactsRefType, ClusterContacts._fields)
+ClusterContactsRefType, ClusterContactsRef = struct_ref(ClusterContacts, __name__)  # grains/refs.py
 
 
 # The parallel kernels take the three tuples as StructRefs (one pointer each, grains/refs.py)

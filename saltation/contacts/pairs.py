@@ -135,9 +135,8 @@ from typing import NamedTuple
 
 import numpy as np
 from numba import njit, prange
-from numba.experimental import structref
 
-from ..grains.refs import FieldsType
+from ..grains.refs import struct_ref
 from ..physics.contact_law import lever_torque, sphere_contact_velocity, spring_dashpot
 from .cells import CellGrid, allocate_cells, build_cells, build_neighbour_list, make_grid, min_image, stencil_cells
 
@@ -262,16 +261,8 @@ class ContactList(NamedTuple):
     builds: np.ndarray  # (1,) int64 number of list builds
 
 
-@structref.register
-class ContactListRefType(FieldsType):
-    pass
-
-
-class ContactListRef(structref.StructRefProxy):
-    """ContactList's fields behind one pointer, for the contact phase's kernels (grains/refs.py)."""
-
-
-structref.define_proxy(ContactListRef, ContactListRefType, ContactList._fields)
+# the list as one pointer, for the contact phase's kernels (grains/refs.py)
+ContactListRefType, ContactListRef = struct_ref(ContactList, __name__)
 
 
 def make_contact_list(pos, box, periodic=(True, False, True), diameter=1.0, skin=0.0,

@@ -167,13 +167,12 @@ from typing import NamedTuple
 
 import numpy as np
 from numba import njit, prange
-from numba.experimental import structref
 
 from ..bed.jumps import close_jump
 from ..bed.packed import bed_cell, bed_offset, bed_stencil_cell
 from ..bed.virtual import virtual_bed_normal
 from ..flight.spheres import GrainState, GrainStateRef
-from ..grains.refs import FieldsType, as_tuple
+from ..grains.refs import as_tuple, struct_ref
 from ..physics.contact_law import lever_torque, sphere_contact_velocity, spring_dashpot
 from ..physics.history import history_mark_impact
 from ..physics.rng import uniform2
@@ -327,39 +326,11 @@ class SubstepSet(NamedTuple):
 
 
 # The set travels between kernels as a StructRef (grains/refs.py), made and grown only in
-# compiled code; the sub-step kernels read it as the tuple above (``as_tuple``).
-@structref.register
-class SubstepSetRefType(FieldsType):
-    pass
-
-
-class SubstepSetRef(structref.StructRefProxy):
-    """SubstepSet's arrays behind one pointer (grains/refs.py)."""
-
-
-structref.define_proxy(SubstepSetRef, SubstepSetRefType, SubstepSet._fields)
-
-
-@structref.register
-class ContactPhaseRefType(FieldsType):
-    pass
-
-
-@structref.register
-class BedContextRefType(FieldsType):
-    pass
-
-
-class ContactPhaseRef(structref.StructRefProxy):
-    """ContactPhase's arrays behind one pointer (grains/refs.py)."""
-
-
-class BedContextRef(structref.StructRefProxy):
-    """BedContext's arrays behind one pointer (grains/refs.py)."""
-
-
-structref.define_proxy(ContactPhaseRef, ContactPhaseRefType, ContactPhase._fields)
-structref.define_proxy(BedContextRef, BedContextRefType, BedContext._fields)
+# compiled code; the sub-step kernels read it as the tuple above (``as_tuple``). The
+# contact phase's other tuples likewise (soft_contact_phase).
+SubstepSetRefType, SubstepSetRef = struct_ref(SubstepSet, __name__)
+ContactPhaseRefType, ContactPhaseRef = struct_ref(ContactPhase, __name__)
+BedContextRefType, BedContextRef = struct_ref(BedContext, __name__)
 
 
 @njit(cache=True)

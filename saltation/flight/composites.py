@@ -98,13 +98,12 @@ from typing import NamedTuple
 
 import numpy as np
 from numba import njit, prange
-from numba.experimental import structref
 
 from flowfields.sampler import ABOVE_TOP, sample_column, sample_point, vorticity_from_gradient
 
 from ..bed.jumps import BED_MIN_JUMP_DURATION, BED_MIN_JUMP_HEIGHT, close_jump
 from ..bed.virtual import BED_MODEL, virtual_bed_normal
-from ..grains.refs import FieldsType, as_tuple
+from ..grains.refs import as_tuple, struct_ref
 from ..grains.status import JUMP_FIELDS, NOT_FINITE, OK
 from ..physics import history
 from ..physics.forces import (
@@ -200,26 +199,8 @@ class ClusterWork(NamedTuple):
 
 # The two tuples above as one pointer each, for kernels that hand them to parallel loops
 # (grains/refs.py): ``ClusterStateRef(*st)``, ``ClusterWorkRef(*w)``.
-@structref.register
-class ClusterStateRefType(FieldsType):
-    pass
-
-
-@structref.register
-class ClusterWorkRefType(FieldsType):
-    pass
-
-
-class ClusterStateRef(structref.StructRefProxy):
-    """ClusterState's arrays behind one pointer (grains/refs.py)."""
-
-
-class ClusterWorkRef(structref.StructRefProxy):
-    """ClusterWork's arrays behind one pointer (grains/refs.py)."""
-
-
-structref.define_proxy(ClusterStateRef, ClusterStateRefType, ClusterState._fields)
-structref.define_proxy(ClusterWorkRef, ClusterWorkRefType, ClusterWork._fields)
+ClusterStateRefType, ClusterStateRef = struct_ref(ClusterState, __name__)
+ClusterWorkRefType, ClusterWorkRef = struct_ref(ClusterWork, __name__)
 
 
 # --------------------------------------------------------------------- set-up (Python)

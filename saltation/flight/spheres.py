@@ -25,11 +25,10 @@ from typing import NamedTuple
 
 import numpy as np
 from numba import njit
-from numba.experimental import structref
 
 from ..bed.jumps import BED_MIN_JUMP_DURATION, BED_MIN_JUMP_HEIGHT, close_jump
 from ..bed.virtual import bed_rebound, virtual_bed_normal
-from ..grains.refs import FieldsType
+from ..grains.refs import struct_ref
 from ..grains.status import JUMP_FIELDS, NOT_FINITE, OK
 from ..physics import history
 from ..physics.fluid import fluid_at_grain, gather_at, grain_velocity, locate_grain, same_cell
@@ -101,26 +100,8 @@ class Workspace(NamedTuple):
 
 # The two tuples above as one pointer each, for kernels that hand them to parallel loops
 # (grains/refs.py): ``GrainStateRef(*st)``, ``WorkspaceRef(*w)``.
-@structref.register
-class GrainStateRefType(FieldsType):
-    pass
-
-
-@structref.register
-class WorkspaceRefType(FieldsType):
-    pass
-
-
-class GrainStateRef(structref.StructRefProxy):
-    """GrainState's arrays behind one pointer (grains/refs.py)."""
-
-
-class WorkspaceRef(structref.StructRefProxy):
-    """Workspace's arrays behind one pointer (grains/refs.py)."""
-
-
-structref.define_proxy(GrainStateRef, GrainStateRefType, GrainState._fields)
-structref.define_proxy(WorkspaceRef, WorkspaceRefType, Workspace._fields)
+GrainStateRefType, GrainStateRef = struct_ref(GrainState, __name__)
+WorkspaceRefType, WorkspaceRef = struct_ref(Workspace, __name__)
 
 
 def make_workspace(n: int) -> Workspace:

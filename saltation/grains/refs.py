@@ -27,6 +27,21 @@ class FieldsType(types.StructRef):
         return tuple((name, types.unliteral(t)) for name, t in fields)
 
 
+def struct_ref(tuple_cls, module: str):
+    """(``<Name>RefType``, ``<Name>Ref``): the Numba type and the constructor of a StructRef
+    with the fields of NamedTuple ``tuple_cls``, ``<Name>Ref(*t)`` in compiled code. The
+    module ``module`` must bind both under those names: Numba's cache pickles the type by
+    its module and name."""
+    name = f"{tuple_cls.__name__}Ref"
+    type_cls = structref.register(type(f"{name}Type", (FieldsType,), {"__module__": module,
+                                                                      "__qualname__": f"{name}Type"}))
+    proxy = type(name, (structref.StructRefProxy,), {
+        "__module__": module, "__qualname__": name,
+        "__doc__": f"{tuple_cls.__name__}'s fields behind one pointer (grains/refs.py)."})
+    structref.define_proxy(proxy, type_cls, tuple_cls._fields)
+    return type_cls, proxy
+
+
 @intrinsic
 def as_tuple(typingctx, ref, cls):
     """The NamedTuple ``cls`` of a StructRef's fields (same names, same order), over the
