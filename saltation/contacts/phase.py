@@ -351,6 +351,13 @@ def _make_set(c, r):
 
 
 @njit(cache=True)
+def substep_view(cs):
+    """A SubstepSetRef as its SubstepSet tuple (the same arrays), for Python: tests and
+    diagnostics (the StructRef has no attributes outside compiled code)."""
+    return as_tuple(cs, SubstepSet)
+
+
+@njit(cache=True)
 def empty_substep_set():
     """A SubstepSet with no room yet, for the first soft_contact_phase (it grows it)."""
     return _make_set(1, 1)
