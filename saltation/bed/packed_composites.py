@@ -36,11 +36,11 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
 from numba import njit, prange
 
 from ..contacts.cells import min_image
 from ..flight.composites import (
+    CHUNK,
     OK,
     ClusterState,
     ClusterStateRef,
@@ -51,6 +51,7 @@ from ..flight.composites import (
     _quat_to_matrix,
     _rotate_quat,
     _world_inverse_inertia,
+    chunk_range,
 )
 from ..grains.refs import as_tuple
 from ..physics.history import history_mark_impact
@@ -231,13 +232,11 @@ def packed_bed_pass(st, w, t, dt, step, bed, pb, last_contact):
     """packed_bed_check_cluster for every grain (in parallel); returns the impulses."""
     n = st.pos.shape[0]
     sr, wr = ClusterStateRef(*st), ClusterWorkRef(*w)  # one pointer each into the loop (grains/refs.py)
-    chunk = 16  # grains per parallel chunk, which reads the state as tuples again
     total = 0
-    for c in prange((n + chunk - 1) // chunk):
+    for c in prange((n + CHUNK - 1) // CHUNK):
         sv, wv = as_tuple(sr, ClusterState), as_tuple(wr, ClusterWork)
-        lo = np.int64(c) * chunk  # int64: one compiled copy (contacts/composites._free_flight)
         hits = 0
-        for p in range(lo, min(n, lo + chunk)):
+        for p in range(*chunk_range(c, n)):
             if sv.status[p] == OK:
                 hits += packed_bed_check_cluster(sv, wv, p, t, dt, step, bed, pb, last_contact)
         total += hits

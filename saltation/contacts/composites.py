@@ -104,13 +104,15 @@ import numpy as np
 from numba import njit, objmode, prange
 
 from ..flight.composites import (
+    CHUNK,
     OK,
     ClusterState,
     ClusterStateRef,
     ClusterWork,
     ClusterWorkRef,
     _quat_to_matrix,
-    step_grain,
+    chunk_range,
+    free_flight_pass,
 )
 from ..grains.refs import as_tuple, struct_ref
 from ..physics.contact_law import spring_dashpot
@@ -181,22 +183,12 @@ ClusterContactsRefType, ClusterContactsRef = struct_ref(ClusterContacts, __name_
 
 
 # The parallel kernels take the three tuples as StructRefs (one pointer each, grains/refs.py)
-# and loop over chunks of CHUNK grains; each chunk reads them as tuples again (as_tuple),
-# so that the per-grain functions below see tuples, as the hot loops must.
-CHUNK = 16
-
-
+# and loop over chunks of grains (flight.composites.CHUNK); each chunk reads them as tuples
+# again (as_tuple), so that the per-grain functions below see tuples, as the hot loops must.
 @njit(cache=True)
 def _refs(st, w, cc):
     """The three tuples as StructRefs over the same arrays (grains/refs.py)."""
     return ClusterStateRef(*st), ClusterWorkRef(*w), ClusterContactsRef(*cc)
-
-
-@njit(cache=True, inline="always")
-def _chunk(c, n):
-    """Grains of chunk c of n grains (int64, whatever the prange index's type)."""
-    lo = np.int64(c) * CHUNK
-    return lo, min(n, lo + CHUNK)
 
 
 @njit(cache=True, inline="always")
@@ -289,7 +281,7 @@ def _reach(st, w, cc, dt):
     n = st.pos.shape[0]
     for c in prange((n + CHUNK - 1) // CHUNK):
         sv, wv, cv = _views(sr, wr, cr)
-        for p in range(*_chunk(c, n)):
+        for p in range(*chunk_range(c, n)):
             _reach_one(sv, wv, cv, p, dt)
 
 
@@ -527,7 +519,7 @@ def _poses(st, w, cc, s, dt):
     n = cc.n_act[0]
     for c in prange((n + CHUNK - 1) // CHUNK):
         sv, wv, cv = _views(sr, wr, cr)
-        for q in range(*_chunk(c, n)):
+        for q in range(*chunk_range(c, n)):
             _pose_one(sv, wv, cv, cv.act[q], s, dt)
 
 
@@ -616,7 +608,7 @@ def component_forces(st, cc, h, sig):
     n = cc.n_act[0]
     for c in prange((n + CHUNK - 1) // CHUNK):
         sv, cv = as_tuple(sr, ClusterState), as_tuple(cr, ClusterContacts)
-        for q in range(*_chunk(c, n)):
+        for q in range(*chunk_range(c, n)):
             _grain_force(sv, cv, cv.act[q], h, sig)
 
 
@@ -744,7 +736,7 @@ def _move_par(sr, wr, cr, h, half_skin, sig, dt):
     over = np.zeros(n, np.int64)
     for c in prange((n + CHUNK - 1) // CHUNK):
         sv, wv, cv = _views(sr, wr, cr)
-        for q in range(*_chunk(c, n)):
+        for q in range(*chunk_range(c, n)):
             over[q] = _move_one(sv, wv, cv, cv.act[q], h, half_skin, sig, dt)
     return over.sum()
 
@@ -763,7 +755,7 @@ def _force_kick_par(sr, cr, h, sig):
     n = cr.n_act[0]
     for c in prange((n + CHUNK - 1) // CHUNK):
         sv, cv = as_tuple(sr, ClusterState), as_tuple(cr, ClusterContacts)
-        for q in range(*_chunk(c, n)):
+        for q in range(*chunk_range(c, n)):
             p = cv.act[q]
             _grain_force(sv, cv, p, h, sig)
             _kick_one(sv, cv, p, 0.5 * h)
@@ -812,7 +804,7 @@ def _finish(sr, wr, cr):
     n = cr.n_act[0]
     for c in prange((n + CHUNK - 1) // CHUNK):
         sv, wv, cv = _views(sr, wr, cr)
-        for q in range(*_chunk(c, n)):
+        for q in range(*chunk_range(c, n)):
             _finish_one(sv, wv, cv, cv.act[q])
 
 
@@ -927,21 +919,6 @@ def _clock():
     return t
 
 
-@njit(cache=True, parallel=True)
-def _free_flight(f, coef, bed, seed, st, w, hc, t, dt, top):
-    above_top, pos, status = st.above_top, st.pos, st.status  # writes in a prange body: not through the tuple
-    sr, wr = ClusterStateRef(*st), ClusterWorkRef(*w)  # one pointer each into the loop (grains/refs.py)
-    n = pos.shape[0]
-    for c in prange((n + CHUNK - 1) // CHUNK):
-        sv, wv = as_tuple(sr, ClusterState), as_tuple(wr, ClusterWork)
-        for p in range(*_chunk(c, n)):  # p int64: one compiled step_grain
-            if status[p] != OK:
-                continue
-            step_grain(f, coef, bed, seed, sv, wv, hc, p, t, dt)
-            if pos[p, 1] > top:
-                above_top[p] += 1
-
-
 @njit(cache=True)
 def advance_clusters_contacts(f, coef, bed, seed, st, w, hc, t0, dt, n_steps, top, cc, n_sub, timers):
     """flight.composites.advance_clusters with grain–grain contacts: free flight (RK4 + bed) of
@@ -954,7 +931,7 @@ def advance_clusters_contacts(f, coef, bed, seed, st, w, hc, t0, dt, n_steps, to
     for s in range(n_steps):
         t = (k0 + s) * dt  # from the global step index: never from where a chunk began
         c0 = _clock()
-        _free_flight(f, coef, bed, seed, st, w, hc, t, dt, top)
+        free_flight_pass(f, coef, bed, seed, st, w, hc, t, dt, top)
         c1 = _clock()
         bad = False
         for p in range(n):

@@ -246,8 +246,8 @@ class Stepper:
         """n_steps steps from t0 (global step index step0); returns the steps done."""
         done, self.cl = advance_split(
             f, self.coef, self.bed, self.virtual, self.packed, st, ws, self.hist_coef, float(t0), self.dt,
-            int(n_steps), self.top_d, int(step0), self.soft, self.hard, self.model, self.cl, self.ph, self.bc, self.scratch, self.pb,
-            self.last_contact, self.timers)
+            int(n_steps), self.top_d, int(step0), self.soft, self.hard, self.model, self.cl, self.ph, self.bc,
+            self.scratch, self.pb, self.last_contact, self.timers)
         return int(done)
 
     # ---------------------------------------------------------------- statistics

@@ -969,26 +969,47 @@ def step_grain(f, coef, bed, seed, st, w, hc, p, t, dt):
             st.jump_ymax[p] = y_new
 
 
-@njit(cache=True, parallel=True, error_model="numpy")
+# A parallel pass over the grains runs over chunks of CHUNK grains; each chunk reads the
+# state as tuples again (grains/refs.as_tuple), as the hot loops must.
+CHUNK = 16
+
+
+@njit(cache=True, inline="always")
+def chunk_range(c, n):
+    """Grains lo..hi-1 of chunk c of n grains, as int64 whatever the prange index's type
+    (int64 where the loop is typed, uint64 inside the parallel kernel): the per-grain
+    functions compile once, not twice."""
+    lo = np.int64(c) * CHUNK
+    return lo, min(n, lo + CHUNK)
+
+
+@njit(cache=True, parallel=True)
+def free_flight_pass(f, coef, bed, seed, st, w, hc, t, dt, top):
+    """step_grain (RK4 + bed) for every grain that is OK, in parallel; counts the grains
+    above the flow's top (``top``)."""
+    above_top, pos, status = st.above_top, st.pos, st.status  # writes in a prange body: not through a tuple
+    sr, wr = ClusterStateRef(*st), ClusterWorkRef(*w)  # one pointer each into the loop (grains/refs.py)
+    n = pos.shape[0]
+    for c in prange((n + CHUNK - 1) // CHUNK):
+        sv, wv = as_tuple(sr, ClusterState), as_tuple(wr, ClusterWork)
+        for p in range(*chunk_range(c, n)):
+            if status[p] != OK:
+                continue
+            step_grain(f, coef, bed, seed, sv, wv, hc, p, t, dt)
+            if pos[p, 1] > top:
+                above_top[p] += 1
+
+
+@njit(cache=True, error_model="numpy")
 def advance_clusters(f, coef, bed, seed, st, w, hc, t0, dt, n_steps, top):
     """Advance all composite grains n_steps from t0 (as tests/peers/sphere_advance.advance): stops early
     when a grain is not finite or a jump buffer is full; returns the steps done."""
     n = st.pos.shape[0]
     cap = st.jump_buf.shape[1]
     k0 = round(t0 / dt)  # the global index of the first step (t0 is always k0 * dt)
-    sr, wr = ClusterStateRef(*st), ClusterWorkRef(*w)  # one pointer each into the loop (grains/refs.py)
-    chunk = 16  # grains per parallel chunk, which reads the state as tuples again
     for s in range(n_steps):
         t = (k0 + s) * dt  # from the global step index: never from where a chunk began
-        for c in prange((n + chunk - 1) // chunk):
-            sv, wv = as_tuple(sr, ClusterState), as_tuple(wr, ClusterWork)
-            lo = np.int64(c) * chunk  # int64: one compiled step_grain (contacts/composites._free_flight)
-            for p in range(lo, min(n, lo + chunk)):
-                if sv.status[p] != OK:
-                    continue
-                step_grain(f, coef, bed, seed, sv, wv, hc, p, t, dt)
-                if sv.pos[p, 1] > top:
-                    sv.above_top[p] += 1
+        free_flight_pass(f, coef, bed, seed, st, w, hc, t, dt, top)
         stop = False
         for p in range(n):
             if st.status[p] != OK or st.jump_buf_n[p] >= cap:
