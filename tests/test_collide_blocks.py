@@ -3,15 +3,20 @@ run block by block, and the result must be the one of a single sweep over all of
 bit for bit, both when the blocks stay apart and when a deflected grain crosses into
 another block (the phase is then redone with the two groups joined, and after
 MERGED_PASSES such passes as one block)."""
+import numba
 import numpy as np
 from test_collide_layout import run_contact_phase
 
 from saltation.contacts import pairs as K
-from saltation.contacts.phase import MERGED_PASSES
+from saltation.contacts.phase import BLOCKS, MERGED_PASSES, PARALLEL_BLOCKS, WAKES
+
+TWO_THREADS = min(2, numba.config.NUMBA_NUM_THREADS)
 
 
-def _run(pos0, vel0, block_members, box, skin, steps, dt, n_sub=128, block_slack=None):
-    return run_contact_phase(pos0, vel0, steps, dt, n_sub, box, skin, 0.3, 0.3, block_members, block_slack)
+def _run(pos0, vel0, block_members, box, skin, steps, dt, n_sub=128, block_slack=None, threads=1,
+         parallel_members=None):
+    return run_contact_phase(pos0, vel0, steps, dt, n_sub, box, skin, 0.3, 0.3, block_members, block_slack,
+                             threads, parallel_members)
 
 
 def _same(a, b):
@@ -103,3 +108,28 @@ def test_a_crossing_in_a_later_step_is_redone_too():
     assert blocked[2].counters[7] >= 1 and single[2].counters[7] == 0
     assert blocked[0].vel[2, 0] > 1.0  # grain 2 was hit
     _same(blocked, single)
+
+
+# ----------------------------------------------------------------------------- threads
+# On more than one thread a block of at least PARALLEL_MEMBERS candidates runs each part of
+# its sub-steps over its members in parallel (contacts/phase._run_blocks): the same bits as
+# one thread and as a single sweep.
+
+
+def test_blocks_on_two_threads_give_the_one_thread_and_single_sweep_result():
+    box, pos, vel = _layer(12.0, 5)
+    runs = {}
+    for name, members, threads in (("two", 10 ** 9, TWO_THREADS), ("one", 10 ** 9, 1), ("blocked2", 1, TWO_THREADS),
+                                   ("blocked1", 1, 1)):
+        # blocks of 20 candidates or more run on all threads (the default is PARALLEL_MEMBERS)
+        runs[name] = _run(pos, vel, members, box, 0.6, 5, 0.02, threads=threads, parallel_members=20)
+    if TWO_THREADS > 1:
+        assert runs["two"][2].counters[PARALLEL_BLOCKS] == 5  # the single block of each step, in parallel
+        assert 0 < runs["blocked2"][2].counters[PARALLEL_BLOCKS] < runs["blocked2"][2].counters[BLOCKS]
+    assert runs["one"][2].counters[PARALLEL_BLOCKS] == runs["blocked1"][2].counters[PARALLEL_BLOCKS] == 0
+    assert runs["two"][1].collisions.sum() > 20 and runs["two"][0].impacts.sum() >= 3
+    assert runs["two"][2].counters[WAKES] > 0  # wake-ups between the parallel parts
+    for name in ("one", "blocked2", "blocked1"):
+        _same(runs["two"], runs[name])
+    for a, b in (("two", "one"), ("blocked2", "blocked1")):
+        np.testing.assert_array_equal(runs[a][2].counters[:PARALLEL_BLOCKS], runs[b][2].counters[:PARALLEL_BLOCKS])

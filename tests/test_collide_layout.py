@@ -1,6 +1,7 @@
 """The contact phase's compact layout (contacts/phase.py, "Memory layout"): a grain woken on a
 deflected path gets its neighbour row from the grain arrays, its own neighbours joining
 the compact set; the set grows without losing its contents; bystanders change nothing."""
+import numba
 import numpy as np
 
 from saltation.bed.packed import make_packed_bed
@@ -18,9 +19,10 @@ from saltation.flight.spheres import make_state, make_workspace
 
 
 def run_contact_phase(pos0, vel0, steps=3, dt=0.02, n_sub=128, box=(12.0, 8.0, 12.0), skin=0.6, friction=0.2,
-                      bed_friction=0.1, block_members=None, block_slack=None):
-    """Straight-line free flight plus the contact phase for ``steps`` steps (virtual bed);
-    returns the state, the list and the phase."""
+                      bed_friction=0.1, block_members=None, block_slack=None, threads=1,
+                      parallel_members=None):
+    """Straight-line free flight plus the contact phase for ``steps`` steps (virtual bed) on
+    ``threads`` Numba threads; returns the state, the list and the phase."""
     n = len(pos0)
     model = K.make_contact_model(5e5, 0.9, friction)
     st = make_state(pos0, vel0, np.zeros((n, 3)), 0.0, 4)
@@ -31,15 +33,18 @@ def run_contact_phase(pos0, vel0, steps=3, dt=0.02, n_sub=128, box=(12.0, 8.0, 1
         ph.block_members[0] = block_members
     if block_slack is not None:
         ph.block_slack[:] = block_slack
+    if parallel_members is not None:
+        ph.parallel_members[0] = parallel_members
     bc = make_bed_context(n, False, make_packed_bed(3.0, 3.0), 0.65, bed_friction, 0.5, model.kn, model.kt, 0,
                           np.full(n, -2, np.int64))
     cs = empty_substep_set()
+    numba.set_num_threads(threads)
     for s in range(steps):
         ws.x0[:, 0:3] = st.pos
         ws.x0[:, 3:6] = st.vel
         ws.x0[:, 6:9] = st.spin
         st.pos[:] += dt * st.vel
-        cl, cs = soft_contact_phase(st, ws.x0, model, cl, ph, bc, s * dt, s, dt, n_sub, cs)
+        cl, cs = soft_contact_phase(st, ws.x0, model, cl, ph, bc, s * dt, s, dt, n_sub, cs, threads)
         assert (ph.loc == -1).all()  # the set is released after each phase
     return st, cl, ph
 

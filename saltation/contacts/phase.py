@@ -155,6 +155,17 @@ even so (2 % in the paper's box: 52 blocks per step, 939 ns per grain-sub-step),
 of more than GIANT_GROUP = 256 members is cut again with σ = (0.15, 0.02) d: 583 ns, 1
 pass redone in 20 steps ((0.1, 0) d: 615 ns but 10 redone — every redo reruns all blocks).
 
+Blocks on several threads. In the dense cases the near-bed layer is one giant group that
+no slack cuts (3.94 %: one or two blocks per step), so blocks are not what is shared
+between threads. Instead, on more than one thread (``soft_contact_phase(..., threads)``)
+a block of at least PARALLEL_MEMBERS candidates runs each part of each sub-step — half
+kick and drift, forces, half kick — over its members in parallel, one contiguous range
+of members per thread (``_substep_part``); the joins and wake-ups between the parts stay
+serial. A member's force is its own sum over its own row (both grains of a pair compute
+it) and every other write is to its own row, so the result is the same bits on any
+thread count (tests/test_collide_blocks.py). ``counters[PARALLEL_BLOCKS]`` counts such
+blocks (summary.json "timing").
+
 Statistics (per grain, race-free): ``cl.collisions`` (contacts begun), ``cl.max_overlap``,
 and here ``contact_substeps`` (sub-steps spent in each contact, summed) and
 ``overlap_sum`` (overlap summed over those sub-steps): mean contact duration in sub-steps
@@ -197,6 +208,7 @@ BLOCK_MEMBERS = 256  # members per block (~1 kB each: a block stays in a 1 MB L2
 GIANT_GROUP = 256  # members: a larger group (a dense layer percolating) is cut with tighter slacks
 GIANT_BLOCK_SLACK = 0.15  # d: those slacks
 GIANT_QUIET_SLACK = 0.02
+PARALLEL_MEMBERS = 256  # candidates: a block this large runs its sub-steps on all threads
 MERGED_PASSES = 3  # passes redone with the conflicting groups joined before one that is a single block
 BC_MIN_JUMP_DURATION, BC_MIN_JUMP_HEIGHT = 7, 8  # slots of BedContext.params (bed/jumps.py)
 BED_SLOTS = 4  # bed spheres one grain can touch at once (3 in a hollow of the packed layer)
@@ -212,7 +224,8 @@ MISSED = 4  # contacts found after the phase that it did not resolve
 BLOCKS = 5  # independent blocks run ("Blocks")
 REDONE_UNBLOCKED = 6  # phases redone as one block
 REDONE_MERGED = 7  # phases redone with conflicting groups merged
-N_COUNTERS = 8
+PARALLEL_BLOCKS = 8  # blocks whose sub-steps ran on several threads (_run_blocks)
+N_COUNTERS = 9
 
 
 class BedContext(NamedTuple):
@@ -265,6 +278,7 @@ class ContactPhase(NamedTuple):
     block_members: np.ndarray  # (1,) int64 most members per block (BLOCK_MEMBERS; "Blocks")
     block_slack: np.ndarray  # (5,) float64 σ (d) of candidates and of the other members (BLOCK_SLACK,
     #                          QUIET_SLACK), the same inside giant groups, giant group size (GIANT_*; "Blocks")
+    parallel_members: np.ndarray  # (1,) int64 fewest candidates of a block run on all threads (PARALLEL_MEMBERS)
 
 
 def make_contact_phase(n: int, block_members: int = BLOCK_MEMBERS,
@@ -274,7 +288,7 @@ def make_contact_phase(n: int, block_members: int = BLOCK_MEMBERS,
         np.zeros(n, np.uint8), np.zeros(n, np.int64), np.zeros(1, np.int64), np.zeros(n), np.zeros((n, 3)),
         np.zeros(n), np.zeros(n), np.zeros(n), np.full(n, -1, np.int64), np.zeros(n), np.zeros(n, np.int64),
         np.zeros(n), np.zeros(N_COUNTERS, np.int64), np.array([block_members], np.int64),
-        np.array([float(x) for x in block_slack]),
+        np.array([float(x) for x in block_slack]), np.array([PARALLEL_MEMBERS], np.int64),
     )
 
 
@@ -286,7 +300,6 @@ class SubstepSet(NamedTuple):
     history and the per-grain state the sub-steps change. ``gid``: the grain's id."""
     n: np.ndarray  # (1,) int64 members in use
     n_rows: np.ndarray  # (1,) int64 flat row entries in use
-    n_act: np.ndarray  # (1,) int64 active members
     gid: np.ndarray  # (C,) int64
     path: np.ndarray  # (C, 18) x₀, u₀, ϖ₀, x₁, u₁, ϖ₁ of the free flight
     cur: np.ndarray  # (C, 9) P, V, W at the current sub-step (active members)
@@ -338,7 +351,7 @@ def _make_set(c, r):
     c = max(c, 1)
     r = max(r, 1)
     return SubstepSetRef(
-        np.zeros(1, np.int64), np.zeros(1, np.int64), np.zeros(1, np.int64), np.empty(c, np.int64),
+        np.zeros(1, np.int64), np.zeros(1, np.int64), np.empty(c, np.int64),
         np.empty((c, 18)), np.empty((c, 9)), np.empty((c, 9)), np.empty((c, 6)), np.empty(c), np.empty(c),
         np.empty(c, np.uint8), np.empty(c, np.uint8), np.empty(c, np.uint8), np.empty(c, np.uint8),
         np.empty(c, np.int64), np.empty(c, np.int64), np.empty(c, np.int64), np.empty(r, np.int64),
@@ -381,7 +394,7 @@ def _grow(cs, c, r):
     c = max(c, 2 * cs.gid.shape[0]) if c > cs.gid.shape[0] else cs.gid.shape[0]
     r = max(r, 2 * cs.nbr.shape[0]) if r > cs.nbr.shape[0] else cs.nbr.shape[0]
     return SubstepSetRef(
-        cs.n, cs.n_rows, cs.n_act, _resized(cs.gid, c), _resized(cs.path, c), _resized(cs.cur, c),
+        cs.n, cs.n_rows, _resized(cs.gid, c), _resized(cs.path, c), _resized(cs.cur, c),
         _resized(cs.dev, c), _resized(cs.ft, c), _resized(cs.dev_max, c), _resized(cs.start, c),
         _resized(cs.active, c), _resized(cs.wake, c), _resized(cs.touched, c), _resized(cs.has_row, c),
         _resized(cs.queue, c), _resized(cs.rs, c), _resized(cs.rc, c), _resized(cs.nbr, r), _resized(cs.shear, r),
@@ -805,17 +818,24 @@ def _block_member(t, lo, hi, app):
     return lo + t if lo + t < hi else app + (lo + t - hi)
 
 
+@njit(cache=True, inline="always")
+def _block_size(cs, lo, hi, app):
+    """Members of a block: lo..hi-1 and those appended from app (_block_member)."""
+    return hi - lo + cs.n[0] - app
+
+
 @njit(cache=True, error_model="numpy", _nrt=False)
-def _forces(cs, st, bc, model, box, per, s, dt, h, lo, hi, app, blk):
-    """Forces on every active member of block blk (members lo..hi-1 and app..n-1) at s;
-    returns how many touched a member that was not active (to be woken). At s = 0 (the
-    set-up) the tangential springs and contact records are not advanced: they hold the
-    previous step's last sub-step. (``update`` is a run-time value, not a compile-time
-    one: one compiled copy of the force code serves both.)"""
+def _forces(cs, st, bc, model, box, per, s, dt, h, lo, hi, app, blk, t0, t1):
+    """Forces on the active members t0..t1-1 of block blk (_block_member) at s; returns
+    how many touched a member that was not active (to be woken). At s = 0 (the set-up)
+    the tangential springs and contact records are not advanced: they hold the previous
+    step's last sub-step. (``update`` is a run-time value, not a compile-time one: one
+    compiled copy of the force code serves both.) Each member's force is its own sum over
+    its own row (both grains of a pair compute it): members can be done in any order."""
     update = s > 0.0
     woke = 0
     active = cs.active
-    for t in range(hi - lo + cs.n[0] - app):
+    for t in range(t0, t1):
         a = _block_member(t, lo, hi, app)
         if active[a] == 0:
             continue
@@ -826,13 +846,14 @@ def _forces(cs, st, bc, model, box, per, s, dt, h, lo, hi, app, blk):
 
 
 @njit(cache=True, error_model="numpy", _nrt=False)
-def _kick_drift_forces(cs, st, bc, model, box, per, s_next, dt, h, lo, hi, app, blk):
-    """First half of a sub-step for block blk: half kick, drift (the active members, in
-    member order: sequential memory), forces at s_next. Returns the count of _forces."""
+def _kick_drift(cs, model, s_next, dt, h, lo, hi, app, t0, t1):
+    """First half of a sub-step for the active members t0..t1-1 of a block: half kick,
+    drift (in member order: sequential memory). The forces at s_next follow (_forces),
+    once every member has drifted."""
     inv_m = 1.0 / model.mass
     inv_i = 1.0 / model.inertia
     active, dev, ft, dev_max = cs.active, cs.dev, cs.ft, cs.dev_max
-    for t in range(hi - lo + cs.n[0] - app):
+    for t in range(t0, t1):
         a = _block_member(t, lo, hi, app)
         if active[a] == 0:
             continue
@@ -844,16 +865,15 @@ def _kick_drift_forces(cs, st, bc, model, box, per, s_next, dt, h, lo, hi, app, 
         if dd > dev_max[a]:
             dev_max[a] = dd
         _set_path(cs, a, s_next, dt)
-    return _forces(cs, st, bc, model, box, per, s_next, dt, h, lo, hi, app, blk)
 
 
 @njit(cache=True, error_model="numpy", _nrt=False)
-def _kick(cs, model, h, lo, hi, app):
-    """Second half kick of a sub-step (members lo..hi-1 and app..n-1)."""
+def _kick(cs, model, h, lo, hi, app, t0, t1):
+    """Second half kick of a sub-step (the block's members t0..t1-1)."""
     inv_m = 1.0 / model.mass
     inv_i = 1.0 / model.inertia
     active, dev, ft = cs.active, cs.dev, cs.ft
-    for t in range(hi - lo + cs.n[0] - app):
+    for t in range(t0, t1):
         a = _block_member(t, lo, hi, app)
         if active[a] == 0:
             continue
@@ -872,14 +892,14 @@ def _activate(cs, a, s, dt):
     cs.dev_max[a] = 0.0
     _set_path(cs, a, s, dt)
     cs.active[a] = 1
-    cs.n_act[0] += 1
 
 
 @njit(cache=True, error_model="numpy", _nrt=False)
 def _join(cs, cand, ptr, end, before, s_now, dt):
     """Activate the candidates cand[ptr:end] (member indices by start) with start <
     ``before`` (start ≤ 0 when ``before`` is 0) at step fraction s_now. Returns the new
-    pointer."""
+    pointer and how many were activated."""
+    joined = 0
     while ptr < end:
         a = cand[ptr]
         t = cs.start[a]
@@ -888,7 +908,8 @@ def _join(cs, cand, ptr, end, before, s_now, dt):
         ptr += 1
         if cs.active[a] == 0:  # else woken earlier
             _activate(cs, a, s_now, dt)
-    return ptr
+            joined += 1
+    return ptr, joined
 
 
 @njit(cache=True, inline="always")
@@ -1131,7 +1152,6 @@ def _gather(x0w, st, cl, bc, ph, dt, d, blocked, forced, cs):
     # room for some woken grains' rows and new neighbours (_give_row grows it if needed)
     cs = _grow(cs, members + members // 8 + 16, rows + rows // 8 + 8 * nbr.shape[1])
     cs.n_rows[0] = 0
-    cs.n_act[0] = 0
     for p in range(members):
         loc[gid[p]] = new[p]
         cs.gid[new[p]] = gid[p]
@@ -1187,7 +1207,7 @@ def _give_row(cs, a, x0w, st, cl, bc, ph):
 def _wake_up(cs, x0w, st, bc, model, cl, ph, s, dt, h, lo, hi, app, blk):
     """Activate every member of block blk not active that an active one touches (its
     deviation is exactly zero until now) and give it its forces at this sub-step; repeat
-    for the members those touch. Returns the (possibly grown) set."""
+    for the members those touch. Returns the (possibly grown) set and how many were woken."""
     box, per = cl.grid.box, cl.grid.periodic
     d2 = model.diameter * model.diameter
     q_lo = 0
@@ -1197,7 +1217,7 @@ def _wake_up(cs, x0w, st, bc, model, cl, ph, s, dt, h, lo, hi, app, blk):
         # members flagged in this round: all active ones of the block at first, then the
         # newly woken
         q_new = q_hi
-        n_scan = hi - lo + cs.n[0] - app if first_round else q_hi - q_lo
+        n_scan = _block_size(cs, lo, hi, app) if first_round else q_hi - q_lo
         for t in range(n_scan):
             if first_round:
                 a = _block_member(t, lo, hi, app)
@@ -1221,7 +1241,6 @@ def _wake_up(cs, x0w, st, bc, model, cl, ph, s, dt, h, lo, hi, app, blk):
         first_round = False
         if q_new == q_hi:
             break
-        ph.counters[WAKES] += q_new - q_hi
         for t in range(q_hi, q_new):
             b = cs.queue[t]
             if cs.has_row[b] == 0:
@@ -1233,39 +1252,105 @@ def _wake_up(cs, x0w, st, bc, model, cl, ph, s, dt, h, lo, hi, app, blk):
             # b alone (as members b..b and none appended): the compiled _forces, not a
             # second inlined copy of the force code (wake-ups are rare)
             b = v.queue[t]
-            _forces(v, sv, bv, model, box, per, s, dt, h, b, b + 1, v.n[0], blk)
+            _forces(v, sv, bv, model, box, per, s, dt, h, b, b + 1, v.n[0], blk, np.int64(0), np.int64(1))
         q_lo = q_hi
         q_hi = q_new
-    return cs
+    return cs, q_hi
+
+
+KICK_DRIFT, FORCES, KICK = 0, 1, 2  # the parts of a sub-step (_substep_part)
+
+
+@njit(cache=True, parallel=True)
+def _substep_part(part, cs, st, bc, model, box, per, s, dt, h, lo, hi, app, blk, lanes, woke):
+    """One part of a sub-step of a large block (KICK_DRIFT, FORCES or KICK), its members
+    cut into ``lanes`` contiguous ranges done in parallel. Every member's arithmetic is
+    its own (_forces), so the result is that of one thread, bit for bit. Returns the
+    count of _forces (FORCES), else 0."""
+    m = _block_size(cs, lo, hi, app)
+    for q in prange(lanes):
+        t0 = np.int64(q) * m // lanes
+        t1 = (np.int64(q) + 1) * m // lanes
+        v = as_tuple(cs, SubstepSet)  # the hot loops read tuples (grains/refs.py)
+        if part == KICK_DRIFT:
+            _kick_drift(v, model, s, dt, h, lo, hi, app, t0, t1)
+        elif part == FORCES:
+            woke[q] = _forces(v, as_tuple(st, GrainState), as_tuple(bc, BedContext), model, box, per, s, dt, h,
+                              lo, hi, app, blk, t0, t1)
+        else:
+            _kick(v, model, h, lo, hi, app, t0, t1)
+    return woke[:lanes].sum() if part == FORCES else 0
 
 
 @njit(cache=True)
-def _run_block(cs, cand, c0, c1, lo, hi, blk, x0w, st, bc, model, cl, ph, dt, n_sub):
+def _run_block(cs, cand, c0, c1, lo, hi, blk, x0w, st, bc, model, cl, ph, dt, n_sub, lanes):
     """All sub-steps of one block: members lo..hi-1, candidates cand[c0:c1]; members
-    appended while it runs (woken grains' neighbours) belong to it. Returns the set."""
+    appended while it runs (woken grains' neighbours) belong to it. With ``lanes`` > 1
+    each part of a sub-step runs over the members in parallel (_substep_part); joins and
+    wake-ups stay serial. Returns the set, the grain-sub-steps done and the grains woken."""
     box, per = cl.grid.box, cl.grid.periodic
     h = dt / n_sub
     app = cs.n[0]
-    act0 = cs.n_act[0]
+    n_act = 0  # active members of the block
+    done = 0
+    woken = 0
+    woke = np.zeros(max(lanes, 1), np.int64)
+    first = np.int64(0)  # not the literal 0: that would compile the kernels once more
     # the sub-step kernels read tuples (grains/refs.as_tuple); the set's view is made
     # again whenever a wake-up may have grown the set
     v, sv, bv = as_tuple(cs, SubstepSet), as_tuple(st, GrainState), as_tuple(bc, BedContext)
     # set-up: forces at s = 0 of the grains in contact now, without advancing the
     # tangential springs (their state is that of the previous step's last sub-step)
-    ptr = _join(v, cand, c0, c1, 0.0, 0.0, dt)
-    if _forces(v, sv, bv, model, box, per, 0.0, dt, h, lo, hi, app, blk) > 0:
-        cs = _wake_up(cs, x0w, st, bc, model, cl, ph, 0.0, dt, h, lo, hi, app, blk)
+    ptr, joined = _join(v, cand, c0, c1, 0.0, 0.0, dt)
+    n_act += joined
+    if _forces(v, sv, bv, model, box, per, 0.0, dt, h, lo, hi, app, blk, first, _block_size(v, lo, hi, app)) > 0:
+        cs, k_w = _wake_up(cs, x0w, st, bc, model, cl, ph, 0.0, dt, h, lo, hi, app, blk)
+        n_act += k_w
+        woken += k_w
         v = as_tuple(cs, SubstepSet)
     for k in range(n_sub):
         s_next = (k + 1) / n_sub
         # grains that may touch something before s_next join now (no force at s_k: they
         # cannot be touching anything yet)
-        ptr = _join(v, cand, ptr, c1, s_next, k / n_sub, dt)
-        ph.counters[SUBSTEPPED] += v.n_act[0] - act0
-        if _kick_drift_forces(v, sv, bv, model, box, per, s_next, dt, h, lo, hi, app, blk) > 0:
-            cs = _wake_up(cs, x0w, st, bc, model, cl, ph, s_next, dt, h, lo, hi, app, blk)
+        ptr, joined = _join(v, cand, ptr, c1, s_next, k / n_sub, dt)
+        n_act += joined
+        done += n_act
+        if lanes > 1:
+            _substep_part(np.int64(KICK_DRIFT), cs, st, bc, model, box, per, s_next, dt, h, lo, hi, app, blk, lanes, woke)
+            n_woke = _substep_part(np.int64(FORCES), cs, st, bc, model, box, per, s_next, dt, h, lo, hi, app, blk, lanes,
+                                   woke)
+        else:
+            m = _block_size(v, lo, hi, app)
+            _kick_drift(v, model, s_next, dt, h, lo, hi, app, first, m)
+            n_woke = _forces(v, sv, bv, model, box, per, s_next, dt, h, lo, hi, app, blk, first, m)
+        if n_woke > 0:
+            cs, k_w = _wake_up(cs, x0w, st, bc, model, cl, ph, s_next, dt, h, lo, hi, app, blk)
+            n_act += k_w
+            woken += k_w
             v = as_tuple(cs, SubstepSet)
-        _kick(v, model, h, lo, hi, app)
+        if lanes > 1:
+            _substep_part(np.int64(KICK), cs, st, bc, model, box, per, s_next, dt, h, lo, hi, app, blk, lanes, woke)
+        else:
+            _kick(v, model, h, lo, hi, app, first, _block_size(v, lo, hi, app))
+    return cs, done, woken
+
+
+@njit(cache=True)
+def _run_blocks(cs, cand, cstart, mstart, x0w, st, bc, model, cl, ph, dt, n_sub, threads):
+    """All blocks of a pass ("Blocks"), one after another; on more than one thread a block
+    of at least ph.parallel_members (PARALLEL_MEMBERS) candidates runs each part of its sub-steps in parallel
+    (_run_block). Returns the set; the counters are added to ph.counters."""
+    for b in range(mstart.shape[0] - 1):
+        c0, c1 = cstart[b], cstart[b + 1]
+        if c1 == c0:
+            continue
+        lanes = threads if c1 - c0 >= ph.parallel_members[0] else 1
+        cs, done, woken = _run_block(cs, cand, c0, c1, mstart[b], mstart[b + 1], b, x0w, st, bc, model, cl, ph,
+                                     dt, n_sub, lanes)
+        ph.counters[SUBSTEPPED] += done
+        ph.counters[WAKES] += woken
+        if lanes > 1:
+            ph.counters[PARALLEL_BLOCKS] += 1
     return cs
 
 
@@ -1396,14 +1481,17 @@ def _with_skin(cl, skin):
 
 
 @njit(cache=True)
-def soft_contact_phase(state, x0w, model, cl, phase, bed, t0, step, dt, n_sub, cs):
+def soft_contact_phase(state, x0w, model, cl, phase, bed, t0, step, dt, n_sub, cs, threads=1):
     """Phase 2 of the module docstring for all grains: the free flight (x₀ in ``x0w``
     (N, 9) = w.x0, x₁ in ``state``, a GrainState; ``phase`` a ContactPhase, ``bed`` a
     BedContext) of step ``step`` (from t0) corrected by soft contacts
     with grains and the bed in ``n_sub`` sub-steps. ``ph.active`` says afterwards which
     grains were sub-stepped (their bed is done; the bed pass must skip them). ``cs``: the
-    SubstepSet the previous phase returned (or ``empty_substep_set()``), reused. Returns
-    the ContactList to keep (it may have been rebuilt) and the set to pass next time."""
+    SubstepSet the previous phase returned (or ``empty_substep_set()``), reused. ``threads``:
+    Numba's thread count (``numba.get_num_threads()``, from Python: called in compiled code
+    it makes the kernel uncachable); on more than one the blocks run in parallel
+    (_run_blocks). Returns the ContactList to keep (it may have been rebuilt) and the set
+    to pass next time."""
     # one pointer each for the state tuples in every kernel below (grains/refs.py)
     st, ph, bc = GrainStateRef(*state), ContactPhaseRef(*phase), BedContextRef(*bed)
     pos, vel = st.pos, st.vel
@@ -1453,10 +1541,7 @@ def soft_contact_phase(state, x0w, model, cl, phase, bed, t0, step, dt, n_sub, c
     while True:
         cs, cand, cstart, mstart, new = _gather(x0w, st, lst, bc, ph, dt, d, passes <= MERGED_PASSES, forced, cs)
         n_blocks = mstart.shape[0] - 1
-        for b in range(n_blocks):
-            if cstart[b + 1] > cstart[b]:
-                cs = _run_block(cs, cand, cstart[b], cstart[b + 1], mstart[b], mstart[b + 1], b, x0w, st, bc,
-                                model, lst, ph, dt, n_sub)
+        cs = _run_blocks(cs, cand, cstart, mstart, x0w, st, bc, model, lst, ph, dt, n_sub, threads)
         ph.counters[BLOCKS] += n_blocks
         if n_blocks == 1:
             break

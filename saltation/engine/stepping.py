@@ -23,6 +23,7 @@ import math
 import time
 from typing import NamedTuple
 
+import numba
 import numpy as np
 from numba import njit, objmode, prange
 
@@ -84,6 +85,7 @@ def _free_flight(f, coef, st, w, hc, t, dt):
 class SoftContacts(NamedTuple):
     """Soft contacts between grains: the sub-stepped contact phase (contacts/phase.py)."""
     n_sub: int  # sub-steps per hydrodynamic step
+    threads: int = 1  # Numba threads: the contact blocks run in parallel on more than one
 
 
 class HardContacts(NamedTuple):
@@ -157,7 +159,8 @@ def advance_split(f, coef, bed, virtual, packed, st, w, hc, t0, dt, n_steps, top
                 bad = True
                 break
         if not bad and soft is not None:
-            cl, cs = soft_contact_phase(st, w.x0, model, cl, ph, bc, t, step0 + s, dt, soft.n_sub, cs)
+            cl, cs = soft_contact_phase(st, w.x0, model, cl, ph, bc, t, step0 + s, dt, soft.n_sub, cs,
+                                        soft.threads)
         if not bad and hard is not None:
             hard_contact_phase(st, cl, hard.restitution, hard.friction, scratch)
         c2 = _clock()
@@ -244,9 +247,12 @@ class Stepper:
 
     def advance(self, f, st, ws, t0: float, n_steps: int, step0: int) -> int:
         """n_steps steps from t0 (global step index step0); returns the steps done."""
+        soft = self.soft
+        if soft is not None:
+            soft = soft._replace(threads=int(numba.get_num_threads()))
         done, self.cl = advance_split(
             f, self.coef, self.bed, self.virtual, self.packed, st, ws, self.hist_coef, float(t0), self.dt,
-            int(n_steps), self.top_d, int(step0), self.soft, self.hard, self.model, self.cl, self.ph, self.bc,
+            int(n_steps), self.top_d, int(step0), soft, self.hard, self.model, self.cl, self.ph, self.bc,
             self.scratch, self.pb, self.last_contact, self.timers)
         return int(done)
 
@@ -319,9 +325,15 @@ class Stepper:
 
     def timing(self) -> dict:
         ff, pc, bd = (float(x) for x in self.timers)
-        return {"free_flight_s": ff, "particle_collisions_s": pc, "bed_s": bd,
-                "split_is": "wall time of each phase's pass over the grains, summed over steps "
-                            "(engine/stepping.py)"}
+        out = {"free_flight_s": ff, "particle_collisions_s": pc, "bed_s": bd,
+               "split_is": "wall time of each phase's pass over the grains, summed over steps "
+                           "(engine/stepping.py)"}
+        if self.contacts_mode == CONTACTS_SOFT:
+            # how the contact phase shared its work between threads: execution, not results
+            out["contact_blocks_in_parallel"] = int(self.ph.counters[phase.PARALLEL_BLOCKS])
+            out["blocks_in_parallel_are"] = ("blocks whose sub-steps ran over their members on all threads "
+                                             "(threads > 1, at least contacts/phase.PARALLEL_MEMBERS candidates)")
+        return out
 
     # ---------------------------------------------------------------- checkpoints
     def state_arrays(self) -> dict:
