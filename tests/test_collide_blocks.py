@@ -112,7 +112,7 @@ def test_a_crossing_in_a_later_step_is_redone_too():
 
 # ----------------------------------------------------------------------------- threads
 # On more than one thread a block of at least PARALLEL_MEMBERS candidates runs each part of
-# its sub-steps over its members in parallel (contacts/phase._run_blocks): the same bits as
+# its sub-steps over its members in parallel (contacts/phase._substep_part): the same bits as
 # one thread and as a single sweep.
 
 
@@ -133,3 +133,24 @@ def test_blocks_on_two_threads_give_the_one_thread_and_single_sweep_result():
         _same(runs["two"], runs[name])
     for a, b in (("two", "one"), ("blocked2", "blocked1")):
         np.testing.assert_array_equal(runs[a][2].counters[:PARALLEL_BLOCKS], runs[b][2].counters[:PARALLEL_BLOCKS])
+
+
+def test_automatic_threads_share_soft_contacts_from_a_few_hundred_grains(tmp_path):
+    # run.threads = 0: a run with soft contacts uses all cores from PARALLEL_MEMBERS grains
+    # (a dilute run without contacts stays on one thread below SERIAL_BELOW)
+    from saltation.case.schema import load_case, resolve_domain
+    from saltation.contacts.phase import PARALLEL_MEMBERS
+    from saltation.engine.simulation import Simulation, _les_box_m, open_flow
+
+    most = numba.config.NUMBA_NUM_THREADS
+    got = {}
+    for model in ("soft", "off", "hard"):
+        for n in (PARALLEL_MEMBERS - 1, PARALLEL_MEMBERS):
+            case = load_case("cases/default.toml", {"collisions.model": model, "run.n_particles": n,
+                                                    "run.threads": 0, "flow.source": "loglaw"})
+            ds = open_flow(case)
+            sim = Simulation(resolve_domain(case, _les_box_m(ds, case)), ds, tmp_path / f"{model}{n}",
+                             progress=False)
+            got[model, n] = sim.threads()
+    assert got["soft", PARALLEL_MEMBERS] == most and got["soft", PARALLEL_MEMBERS - 1] == 1
+    assert got["off", PARALLEL_MEMBERS] == got["hard", PARALLEL_MEMBERS] == 1

@@ -224,7 +224,7 @@ MISSED = 4  # contacts found after the phase that it did not resolve
 BLOCKS = 5  # independent blocks run ("Blocks")
 REDONE_UNBLOCKED = 6  # phases redone as one block
 REDONE_MERGED = 7  # phases redone with conflicting groups merged
-PARALLEL_BLOCKS = 8  # blocks whose sub-steps ran on several threads (_run_blocks)
+PARALLEL_BLOCKS = 8  # blocks whose sub-steps ran on several threads (soft_contact_phase)
 N_COUNTERS = 9
 
 
@@ -1335,25 +1335,6 @@ def _run_block(cs, cand, c0, c1, lo, hi, blk, x0w, st, bc, model, cl, ph, dt, n_
     return cs, done, woken
 
 
-@njit(cache=True)
-def _run_blocks(cs, cand, cstart, mstart, x0w, st, bc, model, cl, ph, dt, n_sub, threads):
-    """All blocks of a pass ("Blocks"), one after another; on more than one thread a block
-    of at least ph.parallel_members (PARALLEL_MEMBERS) candidates runs each part of its sub-steps in parallel
-    (_run_block). Returns the set; the counters are added to ph.counters."""
-    for b in range(mstart.shape[0] - 1):
-        c0, c1 = cstart[b], cstart[b + 1]
-        if c1 == c0:
-            continue
-        lanes = threads if c1 - c0 >= ph.parallel_members[0] else 1
-        cs, done, woken = _run_block(cs, cand, c0, c1, mstart[b], mstart[b + 1], b, x0w, st, bc, model, cl, ph,
-                                     dt, n_sub, lanes)
-        ph.counters[SUBSTEPPED] += done
-        ph.counters[WAKES] += woken
-        if lanes > 1:
-            ph.counters[PARALLEL_BLOCKS] += 1
-    return cs
-
-
 @njit(cache=True, inline="always")
 def _group_of(cs, a, cell_of, forced, mstart):
     """A member (index in cell order) of member a's group; a member appended while its
@@ -1490,7 +1471,7 @@ def soft_contact_phase(state, x0w, model, cl, phase, bed, t0, step, dt, n_sub, c
     SubstepSet the previous phase returned (or ``empty_substep_set()``), reused. ``threads``:
     Numba's thread count (``numba.get_num_threads()``, from Python: called in compiled code
     it makes the kernel uncachable); on more than one the blocks run in parallel
-    (_run_blocks). Returns the ContactList to keep (it may have been rebuilt) and the set
+    (soft_contact_phase). Returns the ContactList to keep (it may have been rebuilt) and the set
     to pass next time."""
     # one pointer each for the state tuples in every kernel below (grains/refs.py)
     st, ph, bc = GrainStateRef(*state), ContactPhaseRef(*phase), BedContextRef(*bed)
@@ -1541,7 +1522,17 @@ def soft_contact_phase(state, x0w, model, cl, phase, bed, t0, step, dt, n_sub, c
     while True:
         cs, cand, cstart, mstart, new = _gather(x0w, st, lst, bc, ph, dt, d, passes <= MERGED_PASSES, forced, cs)
         n_blocks = mstart.shape[0] - 1
-        cs = _run_blocks(cs, cand, cstart, mstart, x0w, st, bc, model, lst, ph, dt, n_sub, threads)
+        for b in range(n_blocks):  # one after another; a large one on all threads (_substep_part)
+            c0, c1 = cstart[b], cstart[b + 1]
+            if c1 == c0:
+                continue
+            lanes = threads if c1 - c0 >= ph.parallel_members[0] else 1
+            cs, done, woken = _run_block(cs, cand, c0, c1, mstart[b], mstart[b + 1], b, x0w, st, bc, model, lst,
+                                         ph, dt, n_sub, lanes)
+            ph.counters[SUBSTEPPED] += done
+            ph.counters[WAKES] += woken
+            if lanes > 1:
+                ph.counters[PARALLEL_BLOCKS] += 1
         ph.counters[BLOCKS] += n_blocks
         if n_blocks == 1:
             break

@@ -24,6 +24,7 @@ import pandas as pd
 from ..bed.packed import hexagonal_pockets as resting_pockets
 from ..bed.virtual import run_bed_parameters
 from ..case.schema import Case, CaseError, dump_toml, load_case, resolve_domain
+from ..contacts.phase import PARALLEL_MEMBERS
 from ..flight.spheres import NOT_FINITE, GrainState, make_state, make_workspace
 from ..grains.initial import initial_conditions, initial_conditions_apart, initial_conditions_resting
 from ..io.progress import compile_notice
@@ -201,14 +202,21 @@ class Simulation:
 
     # ------------------------------------------------------------------ helpers
     SERIAL_BELOW = 2000  # grains: below this a step is too short to share between threads
+    # ... unless soft contacts: from this many grains the sub-steps of the near-bed layer are
+    # worth sharing (contacts/phase.PARALLEL_MEMBERS; benchmarks/bench_dense.py, 2 threads
+    # against 1: 364 grains at 0.52 % 1.18x, 1 450 at 2.07 % 1.56x, 2 760 at 3.94 % 1.66x)
+    SERIAL_BELOW_SOFT = PARALLEL_MEMBERS
 
     def threads(self) -> int:
         """run.threads, or (0 = auto) all cores — one thread for small runs, where the
-        per-step hand-over between threads costs more than the step."""
+        per-step hand-over between threads costs more than the step. (Results do not
+        depend on it: the same bits on any thread count.)"""
         most = numba.config.NUMBA_NUM_THREADS
         if self.case.run.threads:
             return min(self.case.run.threads, most)
-        return 1 if self.n < self.SERIAL_BELOW else most
+        soft_spheres = self.case.collisions.model == "soft" and self.case.particle.shape == "sphere"
+        small = self.SERIAL_BELOW_SOFT if soft_spheres else self.SERIAL_BELOW
+        return 1 if self.n < small else most
 
     def _initial_state(self):
         c = self.case
