@@ -8,15 +8,15 @@ import numpy as np
 from test_collide_layout import run_contact_phase
 
 from saltation.contacts import pairs as K
-from saltation.contacts.phase import BLOCKS, MERGED_PASSES, PARALLEL_BLOCKS, WAKES
+from saltation.contacts.phase import BLOCKS, MERGED_PASSES, PARALLEL_BLOCKS, REDONE_FAR, WAKES
 
 TWO_THREADS = min(2, numba.config.NUMBA_NUM_THREADS)
 
 
 def _run(pos0, vel0, block_members, box, skin, steps, dt, n_sub=128, block_slack=None, threads=1,
-         parallel_members=None):
+         parallel_members=None, near_slack=None):
     return run_contact_phase(pos0, vel0, steps, dt, n_sub, box, skin, 0.3, 0.3, block_members, block_slack,
-                             threads, parallel_members)
+                             threads, parallel_members, near_slack)
 
 
 def _same(a, b):
@@ -154,3 +154,24 @@ def test_automatic_threads_share_soft_contacts_from_a_few_hundred_grains(tmp_pat
             got[model, n] = sim.threads()
     assert got["soft", PARALLEL_MEMBERS] == most and got["soft", PARALLEL_MEMBERS - 1] == 1
     assert got["off", PARALLEL_MEMBERS] == got["hard", PARALLEL_MEMBERS] == 1
+
+
+# ----------------------------------------------------------------------------- near pairs
+# Row entries whose free-flight paths stay further apart than d + 2 NEAR_SLACK are not
+# looked at in the sub-steps; afterwards every such pair of an active grain is checked with
+# the deviations the sub-steps made, and the phase redone without the filter if one may
+# have touched (contacts/phase.py, "Near pairs"). The same bits as without the filter.
+
+
+def test_the_near_pair_filter_gives_the_unfiltered_result_and_redoes_when_a_far_pair_came_near():
+    box, pos, vel = _layer(12.0, 5)
+    plain = _run(pos, vel, 1, box, 0.6, 5, 0.02, near_slack=np.inf)
+    default = _run(pos, vel, 1, box, 0.6, 5, 0.02)
+    tight = _run(pos, vel, 1, box, 0.6, 5, 0.02, near_slack=0.0)  # any deviation toward a far pair fails
+    assert plain[2].counters[REDONE_FAR] == 0
+    assert tight[2].counters[REDONE_FAR] >= 1  # the check found far pairs that came near: redone
+    assert plain[1].collisions.sum() > 20
+    _same(default, plain)
+    _same(tight, plain)
+    for run in (default, tight):
+        np.testing.assert_array_equal(run[2].counters[:3], plain[2].counters[:3])
