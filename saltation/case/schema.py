@@ -543,7 +543,9 @@ class RunConfig(_Table):
         kind="vec3", unit="m",
         doc="[Lx, Lz, H] (m): streamwise, spanwise extent, reference height of C; "
             "absent: the LES box (analytic sources: the paper's [0.176, 0.088, 0.028])")
-    threads: int = _key(0, kind="int", ge=0, doc="worker threads (0: all cores, or one below 2 000 grains, below 256 with soft sphere contacts)")
+    threads: int = _key(0, kind="int", ge=0,
+                        doc="worker threads (0: all cores, or one below 2 000 grains, below 256 with soft sphere "
+                            "contacts)")
     release_height: float | None = _key(kind="float", unit="d", ge=0.5,
                                         doc="centre height above the bed top, in d, where "
                                             "every grain starts at rest (settling runs)")

@@ -375,8 +375,7 @@ def _make_set(c, r):
         np.empty(c, np.uint8), np.empty(c, np.uint8), np.empty(c, np.uint8), np.empty(c, np.uint8),
         np.empty(c, np.int64), np.empty(c, np.int64), np.empty(c, np.int64), np.empty(r, np.int64),
         np.empty((r, 3)), np.empty(r, np.uint8), np.empty(r, np.uint8), np.empty(c, np.int64), np.empty(c),
-        np.empty(c, np.int64),
-        np.empty(c, np.int64), np.empty(c), np.empty(c), np.empty((c, BED_SLOTS), np.int64),
+        np.empty(c, np.int64), np.empty(c, np.int64), np.empty(c), np.empty(c), np.empty((c, BED_SLOTS), np.int64),
         np.empty((c, BED_SLOTS, 3)), np.empty((c, BED_SLOTS, 3)), np.empty(c, np.uint8), np.empty(c, np.int64),
         np.empty((c, 3)), np.empty(c, np.int64), np.empty(c), np.empty(c), np.empty(c), np.empty(c, np.int64),
         np.empty(c, np.int64), np.empty(c, np.int64),
@@ -418,7 +417,8 @@ def _grow(cs, c, r):
         _resized(cs.dev, c), _resized(cs.ft, c), _resized(cs.dev_max, c), _resized(cs.start, c),
         _resized(cs.active, c), _resized(cs.wake, c), _resized(cs.touched, c), _resized(cs.has_row, c),
         _resized(cs.queue, c), _resized(cs.rs, c), _resized(cs.rc, c), _resized(cs.nbr, r), _resized(cs.shear, r),
-        _resized(cs.touch, r), _resized(cs.near, r), _resized(cs.collisions, c), _resized(cs.max_overlap, c), _resized(cs.n_touch, c),
+        _resized(cs.touch, r), _resized(cs.near, r), _resized(cs.collisions, c), _resized(cs.max_overlap, c),
+        _resized(cs.n_touch, c),
         _resized(cs.contact_substeps, c), _resized(cs.overlap_sum, c), _resized(cs.bed_overlap_max, c),
         _resized(cs.slot_id, c), _resized(cs.slot_c, c), _resized(cs.slot_shear, c), _resized(cs.in_bed, c),
         _resized(cs.last_contact, c), _resized(cs.nrm, c), _resized(cs.impacts, c), _resized(cs.jump_t0, c),
@@ -1017,6 +1017,13 @@ def _path_gap(x0i, x1i, u0i, u1i, x0j, x1j, u0j, u1j, box, per, dt):
 
 
 @njit(cache=True, inline="always")
+def _member_gap(path, a, b, box, per, dt):
+    """_path_gap of members a and b of a SubstepSet (``path``: its free-flight rows)."""
+    return _path_gap(path[a, 0:3], path[a, 9:12], path[a, 3:6], path[a, 12:15], path[b, 0:3], path[b, 9:12],
+                     path[b, 3:6], path[b, 12:15], box, per, dt)
+
+
+@njit(cache=True, inline="always")
 def _root(parent, p):
     while parent[p] != p:
         parent[p] = parent[parent[p]]
@@ -1220,8 +1227,7 @@ def _near_pairs(cs, cand, box, per, dt, limit):
             if cs.touch[k] != 0:
                 continue
             b = cs.nbr[k]
-            gap = _path_gap(path[a, 0:3], path[a, 9:12], path[a, 3:6], path[a, 12:15], path[b, 0:3],
-                            path[b, 9:12], path[b, 3:6], path[b, 12:15], box, per, dt)
+            gap = _member_gap(path, a, b, box, per, dt)
             if gap > limit:
                 cs.near[k] = 0
 
@@ -1357,9 +1363,10 @@ def _run_block(cs, cand, c0, c1, lo, hi, blk, x0w, st, bc, model, cl, ph, dt, n_
         n_act += joined
         done += n_act
         if lanes > 1:
-            _substep_part(np.int64(KICK_DRIFT), cs, st, bc, model, box, per, s_next, dt, h, lo, hi, app, blk, lanes, woke)
-            n_woke = _substep_part(np.int64(FORCES), cs, st, bc, model, box, per, s_next, dt, h, lo, hi, app, blk, lanes,
-                                   woke)
+            _substep_part(np.int64(KICK_DRIFT), cs, st, bc, model, box, per, s_next, dt, h, lo, hi, app, blk, lanes,
+                          woke)
+            n_woke = _substep_part(np.int64(FORCES), cs, st, bc, model, box, per, s_next, dt, h, lo, hi, app, blk,
+                                   lanes, woke)
         else:
             m = _block_size(v, lo, hi, app)
             _kick_drift(v, model, s_next, dt, h, lo, hi, app, first, m)
@@ -1414,8 +1421,7 @@ def _conflicts(cs, dt, d, box, per, forced, new, mstart):
             if not across and cs.near[k] != 0:
                 continue
             db = math.sqrt(cs.dev_max[b]) if cs.active[b] != 0 else 0.0
-            gap = _path_gap(path[a, 0:3], path[a, 9:12], path[a, 3:6], path[a, 12:15], path[b, 0:3],
-                            path[b, 9:12], path[b, 3:6], path[b, 12:15], box, per, dt)
+            gap = _member_gap(path, a, b, box, per, dt)
             if gap - da - db > d * (1.0 + 1e-9):
                 continue
             if not across:
@@ -1518,9 +1524,9 @@ def soft_contact_phase(state, x0w, model, cl, phase, bed, t0, step, dt, n_sub, c
     grains were sub-stepped (their bed is done; the bed pass must skip them). ``cs``: the
     SubstepSet the previous phase returned (or ``empty_substep_set()``), reused. ``threads``:
     Numba's thread count (``numba.get_num_threads()``, from Python: called in compiled code
-    it makes the kernel uncachable); on more than one the blocks run in parallel
-    (soft_contact_phase). Returns the ContactList to keep (it may have been rebuilt) and the set
-    to pass next time."""
+    it makes the kernel uncachable); on more than one a large block's sub-steps run over
+    its members on all of them (_substep_part). Returns the ContactList to keep (it may
+    have been rebuilt) and the set to pass next time."""
     # one pointer each for the state tuples in every kernel below (grains/refs.py)
     st, ph, bc = GrainStateRef(*state), ContactPhaseRef(*phase), BedContextRef(*bed)
     pos, vel = st.pos, st.vel
