@@ -439,6 +439,10 @@ def _threshold(args) -> int:
         kw["coverage"] = args.coverage
     if args.duration is not None:
         kw["duration_d"] = args.duration
+    if args.settle is not None:
+        if not args.settle >= 0:
+            raise UsageError(f"--settle {args.settle}: must be a number >= 0")
+        kw["settle_d"] = args.settle
     res = threshold_study(args.case, out, overrides=overrides, progress=not args.quiet, **kw)
     print(f"\nd = {1e3 * res['diameter_m']:.3g} mm, D* = {res['d_star']:.3g}; Shields (Soulsby & Whitehouse 1997) "
           f"theta_cr = {res['shields_soulsby_whitehouse_1997']:.4f}")
@@ -551,6 +555,9 @@ def build_parser() -> argparse.ArgumentParser:
     th.add_argument("--width", default=None, help="bed Lx,Lz in d (default 20,12)")
     th.add_argument("--coverage", type=float, default=None, help="grains at rest per bed sphere (default 0.4; random filling holds ~0.45)")
     th.add_argument("--duration", type=float, default=None, help="simulated time per tau*, in d/u* (default 200)")
+    th.add_argument("--settle", type=float, default=None,
+                    help="d/u* run before the measured duration (default 0 for spheres, which start in "
+                         "equilibrium; 10 for bonded-sphere grains, which are lowered onto the bed and settle)")
     th.add_argument("--quiet", action="store_true", help="no progress bars")
     th.set_defaults(func=_threshold)
 

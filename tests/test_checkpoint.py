@@ -222,3 +222,28 @@ def test_composite_run_interrupted_and_resumed_is_the_uninterrupted_run(tmp_path
     for name in ("jumps.parquet", "tracks.parquet", "particles.parquet"):
         pd.testing.assert_frame_equal(pd.read_parquet(tmp_path / "ref" / name), pd.read_parquet(tmp_path / "b" / name),
                                       check_exact=True)
+
+
+def test_resting_composites_interrupted_and_resumed_are_the_uninterrupted_run(tmp_path):
+    """Bonded-sphere grains at rest on the packed bed (soft bed contacts in the contact
+    phase, their springs and last-contact steps in the checkpoint) resume bit for bit."""
+    from saltation.engine.composites import ClusterSimulation
+
+    d = 0.69e-3
+    case = tiny_case(n=10, duration=0.1, **{
+        "particle.shape": "mixture", "collisions.model": "soft", "bed.model": "packed", "run.start": "rest",
+        "run.domain": [6 * d, 7 * d, 50 * d], "run.dt_particle": 0.01, "flow.source": "les", "flow.tau_ratio": 1.0,
+        "output.vtk": False})
+    ref = run(case, out=tmp_path / "ref", progress=False)
+    assert ref.summary["collisions"]["bed"] > 0
+    c = load_case(case)
+    ds = open_flow(c)
+    c = resolve_domain(c, _les_box_m(ds, c))
+    with pytest.raises(RunInterrupted) as stop:
+        ClusterSimulation(c, ds, tmp_path / "b", progress=False, stop_after_steps=200).run()
+    res = run(case, out=tmp_path / "b", progress=False, resume=True)
+    assert res.summary["resumed_from_step"] == stop.value.result.summary["steps"] < ref.summary["steps"]
+    assert res.summary["collisions"] == ref.summary["collisions"]
+    for name in ("jumps.parquet", "tracks.parquet", "particles.parquet"):
+        pd.testing.assert_frame_equal(pd.read_parquet(tmp_path / "ref" / name), pd.read_parquet(tmp_path / "b" / name),
+                                      check_exact=True)

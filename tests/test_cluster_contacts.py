@@ -44,7 +44,7 @@ def _run(st, w, cc, n_sub, steps, dt=DT, record=None):
     timers = np.zeros(2)
     for s in range(steps):
         _, cc = ccm.advance_clusters_contacts(still.arrays, _vacuum(), bed, 0, st, w, hc, s * dt, dt, 1, 1e9, cc,
-                                              n_sub, timers)
+                                              n_sub, timers, None)
         if record is not None:
             record(st, cc)
     return cc
@@ -155,7 +155,7 @@ def test_no_pair_missed_across_cells_and_periodic_boundaries(seed):
     w.x0[:, 3:6] = st.vel
     w.x0[:, 6:10] = st.quat
     w.x0[:, 10:13] = st.omega
-    cc = ccm.build_contact_list(st, w, cc, DT)
+    cc = ccm.build_contact_list(st, w, cc, DT, None)
     brute = ccm.brute_force_pairs(st, box, skin)
     assert len(brute) > 20
     assert ccm.listed_pairs(cc) == brute

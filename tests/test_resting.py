@@ -151,3 +151,87 @@ def test_sliding_past_the_friction_limit(monkeypatch, tmp_path):
     expected = G_V * (math.sin(theta) - MU * math.cos(theta) / math.sqrt(1 - W * W))
     assert abs(a / expected - 1) < 0.05, (a, expected)
     assert slip > 1.3, slip  # the grain slides: its surface moves slower than it
+
+
+# ----------------------------------------------------------------------------- bonded-sphere grains
+# The same checks for bonded-sphere grains (engine/composites.py): their bed contacts in the
+# contact phase are soft contacts of their component spheres with the bed spheres
+# (contacts/composites.py, "The packed bed").
+def _composite_case(n, shape="mixture", **kw):
+    case = _case(n, **kw)
+    case["particle"]["shape"] = shape
+    return case
+
+
+def test_composites_are_placed_on_the_bed_without_overlaps():
+    from saltation.engine.composites import draw_grains, random_quaternions
+    from saltation.flight.composites import quat_to_matrix_py
+    from saltation.grains.initial import composites_resting
+
+    case = saltation.load_case(_composite_case(30))
+    _, _, comps = draw_grains(case, 30)
+    quat = random_quaternions(30, np.random.default_rng(1))
+    offsets = [g.centres @ quat_to_matrix_py(q).T for g, q in zip(comps, quat)]
+    radii = [0.5 * np.asarray(g.diameters) for g in comps]
+    bed = hexagonal_layer(LX * 2, LZ * 2)[0]
+    gap = 1e-3
+    pos = composites_resting(offsets, radii, hexagonal_pockets(LX * 2, LZ * 2), bed, (LX * 2, LZ * 2), 3, gap)
+    box = np.array([LX * 2, LZ * 2])
+    world = [p + o for p, o in zip(pos, offsets)]
+
+    def gaps(a, ra, b, rb):
+        d = a[:, None, :] - b[None, :, :]
+        d[..., 0] -= box[0] * np.round(d[..., 0] / box[0])
+        d[..., 2] -= box[1] * np.round(d[..., 2] / box[1])
+        return np.sqrt((d * d).sum(axis=2)) - ra[:, None] - rb[None, :]
+
+    for i in range(30):
+        to_bed = gaps(world[i], radii[i], bed, np.full(len(bed), 0.5))
+        assert 0.0 < to_bed.min() <= gap  # raised by the gap from its first touch: near, not inside
+        for j in range(i):
+            assert gaps(world[i], radii[i], world[j], radii[j]).min() >= gap - 1e-12
+    with pytest.raises(ValueError, match="room for"):
+        composites_resting(offsets * 10, radii * 10, hexagonal_pockets(LX, LZ), hexagonal_layer(LX, LZ)[0],
+                           (LX, LZ), 3)
+
+
+def test_composites_settle_and_stay_at_rest_in_still_water(tmp_path):
+    """Target (issue 20): drift < 1e-3 d over 10⁴ steps, once the grains dropped onto the
+    bed have tipped into a stable pose (within ~40 d/u* of still-water time here)."""
+    case = _composite_case(3, duration=0.66)
+    case["output"]["tracks_interval"] = 0.02
+    r = saltation.run(case, out=tmp_path / "still")
+    tr = r.tracks
+    ts = np.sort(tr.t.unique())
+    settled = ts[ts >= 40.0][0]
+    assert (ts[-1] - settled) / 0.005 >= 10_000
+    a = tr[tr.t == settled].set_index("particle")
+    b = tr[tr.t == ts[-1]].set_index("particle")
+    drift = np.sqrt((b.x - a.x) ** 2 + (b.y - a.y) ** 2 + (b.z - a.z) ** 2).to_numpy()
+    assert drift.max() < 1e-3, drift
+    assert r.summary["jumps"]["count"] == 0
+    # they rest on the bed, not in it: the lowest points lie below the bed top by less
+    # than the soft contact's overlap allows
+    assert tr[tr.t == ts[-1]].y.min() > 0.0
+
+
+def _one_sphere_grains(monkeypatch):
+    """Bonded-sphere grains of one sphere of diameter Dn: the sphere contact exactly
+    (contacts/composites.py), so the sphere's analytic results apply."""
+    import saltation.engine.composites as engine
+    from saltation.grains.shapes import Composite
+
+    one = Composite.from_spheres([[0.0, 0.0, 0.0]], [0.5], zingg="equant", subtype=1, axes=(1.0, 1.0, 1.0))
+    monkeypatch.setattr(engine, "draw_grains", lambda case, n: (["equant"] * n, np.ones((n, 3)), [one] * n))
+
+
+@pytest.mark.parametrize("factor, moves", [(0.95, False), (1.05, True)])
+def test_critical_tilt_of_a_one_sphere_composite(monkeypatch, tmp_path, factor, moves):
+    _one_sphere_grains(monkeypatch)
+    r = saltation.run(_composite_case(4, shape="equant", slope=factor * THETA_C, duration=0.3),
+                      out=tmp_path / "tilt")
+    drift = _displacements(r.tracks)
+    if moves:
+        assert drift.min() > 0.5, drift
+    else:
+        assert drift.max() < 1e-2, drift

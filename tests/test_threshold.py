@@ -62,10 +62,7 @@ def test_tail_shape_tells_exponential_from_power_law():
     assert pareto["hill_tail_exponent"] < 2.0 < expo["hill_tail_exponent"]
 
 
-def test_threshold_command_on_a_small_bed(tmp_path, capsys):
-    """The user path: a case file, two Shields numbers, threshold.json read back."""
-    case = tmp_path / "rest.toml"
-    case.write_text("""
+SMALL_CASE = """
 [particle]
 diameter = 0.69e-3
 density = 2650.0
@@ -86,7 +83,13 @@ n_particles = 10
 domain = [0.0042, 0.0048, 0.0345]
 duration = 0.1
 dt_particle = 0.01
-""")
+"""
+
+
+def test_threshold_command_on_a_small_bed(tmp_path, capsys):
+    """The user path: a case file, two Shields numbers, threshold.json read back."""
+    case = tmp_path / "rest.toml"
+    case.write_text(SMALL_CASE)
     rc = main(["threshold", str(case), "--out", str(tmp_path / "th"), "--tau-stars", "0.002,0.06",
                "--width", "6,7", "--duration", "15", "--quiet"])
     assert rc == 0
@@ -103,6 +106,29 @@ dt_particle = 0.01
     assert main(["threshold", str(case), "--out", str(tmp_path / "th"), "--tau-stars", "0.002,0.06",
                  "--width", "6,7", "--duration", "15", "--quiet"]) == 0
     assert json.loads((tmp_path / "th" / "threshold.json").read_text())["tau_star_c"] == res["tau_star_c"]
+
+
+def test_threshold_command_for_bonded_sphere_grains(tmp_path):
+    """The natural mixture rests on the bed too: placed, settled (the first
+    SETTLE_COMPOSITES d/u* not measured), re-entrained at twice the Shields value."""
+    case = tmp_path / "rest.toml"
+    case.write_text(SMALL_CASE)
+    assert main(["threshold", str(case), "--out", str(tmp_path / "th"), "--tau-stars", "0.002,0.06",
+                 "--width", "6,7", "--duration", "15", "--set", "particle.shape=mixture", "--quiet"]) == 0
+    res = json.loads((tmp_path / "th" / "threshold.json").read_text())
+    assert res["shape"] == "mixture" and res["settle_d_u"] == 10.0
+    rows = res["table"]
+    assert rows[0]["q_star"] < 1e-4 < rows[1]["q_star"]
+    assert rows[0]["fraction_moving"] < 0.05 < rows[1]["fraction_moving"]
+    tracks = pd.read_parquet(next((tmp_path / "th").glob("tau_0.00200/tracks.parquet")))
+    assert tracks["t"].max() >= 24.9  # settle + measured window
+
+
+def test_displacement_rate_weighs_each_grain_by_its_volume():
+    tracks = pd.DataFrame({"particle": [0, 0, 1, 1], "t": [0.0, 2.0, 0.0, 2.0], "x": [0.0, 1.0, 0.0, 3.0]})
+    assert displacement_rate(tracks, 4.0) == pytest.approx(math.pi / 6 * 4.0 / 8.0)
+    vol = pd.Series([0.5, 0.25], index=[0, 1])
+    assert displacement_rate(tracks, 4.0, vol) == pytest.approx((0.5 * 1.0 + 0.25 * 3.0) / 8.0)
 
 
 def test_threshold_command_rejects_bad_input(tmp_path, capsys):

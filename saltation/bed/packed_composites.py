@@ -228,8 +228,10 @@ def packed_bed_check_cluster(st, w, p, t, dt, step, bed, pb, last_contact):
 
 
 @njit(cache=True, parallel=True, error_model="numpy")
-def packed_bed_pass(st, w, t, dt, step, bed, pb, last_contact):
-    """packed_bed_check_cluster for every grain (in parallel); returns the impulses."""
+def packed_bed_pass(st, w, t, dt, step, bed, pb, last_contact, skip):
+    """packed_bed_check_cluster for every grain (in parallel) but those with skip[p] ≠ 0
+    (the contact phase's sub-stepped grains, which had their bed contacts there as soft
+    contacts: contacts/composites.py); returns the impulses."""
     n = st.pos.shape[0]
     sr, wr = ClusterStateRef(*st), ClusterWorkRef(*w)  # one pointer each into the loop (grains/refs.py)
     total = 0
@@ -237,7 +239,7 @@ def packed_bed_pass(st, w, t, dt, step, bed, pb, last_contact):
         sv, wv = as_tuple(sr, ClusterState), as_tuple(wr, ClusterWork)
         hits = 0
         for p in range(*chunk_range(c, n)):
-            if sv.status[p] == OK:
+            if sv.status[p] == OK and skip[p] == 0:
                 hits += packed_bed_check_cluster(sv, wv, p, t, dt, step, bed, pb, last_contact)
         total += hits
     return total

@@ -552,8 +552,8 @@ class RunConfig(_Table):
     start: str = _key("flight", kind="choice", choices=("flight", "rest"),
                       doc='how grains start: "flight" (near-bed layer, take-off velocities; '
                           'grains/initial.py) or "rest" (each at rest in a hollow of the packed '
-                          'bed: bed load, incipient motion; needs bed.model = "packed", '
-                          'collisions.model = "soft" and spheres)')
+                          'bed: bed load, incipient motion; needs bed.model = "packed" and '
+                          'collisions.model = "soft"; spheres or bonded-sphere grains)')
 
     def __post_init__(self):
         if self.dt is None and self.dt_particle is None:
@@ -949,9 +949,7 @@ class Case:
         if self.run.start == "rest":
             need = [(f'bed.model = "{self.bed.model}"', self.bed.model == "packed", '"packed" (hollows to rest in)'),
                     (f'collisions.model = "{self.collisions.model}"', self.collisions.model == "soft",
-                     '"soft" (resting contacts are soft contacts with the bed spheres)'),
-                    (f'particle.shape = "{self.particle.shape}"', self.particle.shape == "sphere",
-                     '"sphere" (bonded-sphere grains have no soft bed contacts yet)')]
+                     '"soft" (resting contacts are soft contacts with the bed spheres)')]
             for given, ok, want in need:
                 if not ok:
                     raise CaseError(f'run.start = "rest" needs {want}, got {given}', "run", "start")

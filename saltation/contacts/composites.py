@@ -82,12 +82,29 @@ off-centre collision of a spinning rod and blade: kinetic energy after/before �
 (it is 0 to round-off for grains that do not spin; angular and linear momentum are
 conserved to round-off whatever the spin).
 
-Known gaps: the bed is not part of the sub-steps (the free flight has already applied
-the rebound; a grain pushed below the bed top by a contact is lifted back by the next
-free-flight step); a grain deflected by more than the engagement margin s towards a
-grain that was not active is not stopped (``overruns`` counts the steps where that was
-possible; ``missed_contacts`` — brute-force check at the end of such a step — the pairs
-in contact that the list did not hold).
+The packed bed (bed.model = "packed", ``with_packed_bed``)
+----------------------------------------------------------
+A grain that is sub-stepped has its bed contacts inside the sub-steps, as for spheres
+(contacts/phase.py, "The bed in the contact phase"): the bed spheres (diameter 1, fixed)
+are partners in its components' neighbour rows (ids −1 − j, found through the bed's
+cells, same cutoff and skin, their tangential springs carried over by id like any
+other), with the one contact law and a fixed partner: m_eff = m_i (the rigid mass), the
+dashpot from the **bed** restitution, the bed friction, the same k_n and k_t; the
+contact point is again the middle of the overlap. A grain resting or rolling on the bed
+(a bed contact in the last step, or touching it at the last evaluation) whose path's
+lowest point can reach the bed top (``_path_bottom``) is made active, so it keeps its
+soft bed contacts from step to step instead of the hard rebound and push-out of
+bed/packed_composites.py, which would make it bounce in its hollow every step. That
+pass skips every active grain. Jumps as there: the first bed contact after at least
+one step off the bed is a bed impact and ends a jump; while the contact lasts, the next
+jump's start moves with the grain. (The virtual bed stays in the free flight, hard.)
+
+Known gaps: on the virtual bed the bed is not part of the sub-steps (the free flight
+has already applied the rebound; a grain pushed below the bed top by a contact is
+lifted back by the next free-flight step); a grain deflected by more than the
+engagement margin s towards a grain that was not active is not stopped (``overruns``
+counts the steps where that was possible; ``missed_contacts`` — brute-force check at the
+end of such a step — the pairs in contact that the list did not hold).
 
 Statistics (per grain, race-free): grain–grain collisions begun (a pair of grains that
 goes from no touching component pair to at least one; Σ/2 = collisions), the largest
@@ -103,6 +120,8 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit, objmode, prange
 
+from ..bed.jumps import close_jump
+from ..bed.packed import BED_CENTRE_Y
 from ..flight.composites import (
     CHUNK,
     OK,
@@ -110,6 +129,7 @@ from ..flight.composites import (
     ClusterStateRef,
     ClusterWork,
     ClusterWorkRef,
+    _lowest,
     _quat_to_matrix,
     chunk_range,
     free_flight_pass,
@@ -119,7 +139,7 @@ from ..physics.contact_law import spring_dashpot
 from ..physics.history import history_mark_impact
 from .cells import axis_index, grid_shape, min_image, sort_points, stencil_cell
 
-__all__ = ["ClusterContacts", "make_cluster_contacts", "contact_parameters", "substeps", "contact_phase",
+__all__ = ["ClusterContacts", "make_cluster_contacts", "with_packed_bed", "contact_parameters", "substeps", "contact_phase",
            "build_contact_list",
            "advance_clusters_contacts", "component_forces", "brute_force_pairs", "listed_pairs",
            "point_effective_masses", "DEFAULT_SKIN"]
@@ -177,6 +197,14 @@ class ClusterContacts(NamedTuple):
     overlap_sum: np.ndarray  # (N,) Σ overlap over component-contact sub-steps
     contact_substeps: np.ndarray  # (N,) int64 Σ component-contact sub-steps
     counters: np.ndarray  # (N_COUNTERS,) int64
+    # the packed bed's spheres as fixed partners (module docstring, "The packed bed")
+    bed_centres: np.ndarray  # (M, 3) bed sphere centres (Dn); (0, 3) without a packed bed
+    bed_par: np.ndarray  # (4,) ζ_bed, f_bed, shortest jump duration, lowest jump height (bed/jumps.py)
+    step_t: np.ndarray  # (2,) start time t and length Δt of the step being taken (Dn/u*)
+    step_index: np.ndarray  # (1,) int64 global index of that step
+    last_contact: np.ndarray  # (N,) int64 last step with bed contact (shared with bed/packed_composites.py)
+    in_bed: np.ndarray  # (N,) uint8 touching a bed sphere at the last evaluation
+    bed_touch: np.ndarray  # (N,) uint8 touched a bed sphere in this step
 
 
 ClusterContactsRefType, ClusterContactsRef = struct_ref(ClusterContacts, __name__)  # grains/refs.py
@@ -261,7 +289,19 @@ def make_cluster_contacts(st, par, capacity: int = 32) -> ClusterContacts:
         np.zeros(n, np.uint8), np.zeros(n, np.int64), np.zeros(1, np.int64), np.zeros(n, np.uint8),
         np.zeros(n), np.zeros(n), np.zeros((n, 13)), z3(n), z3(n), z3(n), np.zeros((n, 4)), np.zeros(n),
         z3(n), z3(n), z3(n), z3(n), np.zeros((n, 3, 3)), np.zeros((n, 3, 3)), z3(kt), z3(n), z3(n),
-        np.zeros(n, np.int64), np.zeros(n), np.zeros(n), np.zeros(n, np.int64), np.zeros(N_COUNTERS, np.int64))
+        np.zeros(n, np.int64), np.zeros(n), np.zeros(n), np.zeros(n, np.int64), np.zeros(N_COUNTERS, np.int64),
+        np.zeros((0, 3)), np.zeros(4), np.zeros(2), np.zeros(1, np.int64), np.full(n, -2, np.int64),
+        np.zeros(n, np.uint8), np.zeros(n, np.uint8))
+
+
+def with_packed_bed(cc: ClusterContacts, pb, restitution: float, friction: float, jump_limits,
+                    last_contact) -> ClusterContacts:
+    """The contact state with the packed bed's spheres (bed.packed.PackedBed ``pb``) as
+    fixed partners of the sub-steps: bed restitution and friction, the jump thresholds
+    (shortest duration, lowest height; bed/jumps.py) and the engine's ``last_contact``
+    array (N,) int64, which the hard bed pass shares."""
+    par = np.array([damping_factor(restitution), float(friction), float(jump_limits[0]), float(jump_limits[1])])
+    return cc._replace(bed_centres=np.ascontiguousarray(pb.centres), bed_par=par, last_contact=last_contact)
 
 
 # ----------------------------------------------------------------------------- small kernels
@@ -339,6 +379,16 @@ def _engage_pass(pos, ok, rho, reach, skin, box, n, size, start, count, order, i
         active[i] = hit
 
 
+@njit(cache=True, inline="always")
+def _path_bottom(w, cc, p):
+    """A lower bound of grain p's lowest point on its free path in the step: the lower
+    end minus the Hermite bulge (D_i − chord) and the bounding radius ρ_i."""
+    chord = 0.0
+    for i in range(3):
+        chord += (cc.x1[p, i] - w.x0[p, i]) ** 2
+    return min(w.x0[p, 1], cc.x1[p, 1]) - (cc.reach[p] - math.sqrt(chord)) - cc.rho[p]
+
+
 @njit(cache=True)
 def _engage(st, w, cc):
     """Mark the active grains (module docstring, step 2) and list them in cc.act."""
@@ -367,6 +417,14 @@ def _engage(st, w, cc):
     if 2.0 * (rmax + dmax) + skin > 0.5 * min(box[0], box[2]):
         cc.counters[OVERRUNS] += 1  # cells capped at half the box: counted as an overrun
     _engage_pass(pos, st.status, cc.rho, cc.reach, skin, box, gn, size, start, count, order, ids, cc.active)
+    if cc.bed_centres.shape[0] > 0:
+        # a grain resting or rolling on the packed bed (bed contact in the last step) whose
+        # path can reach the bed again keeps its soft bed contacts (module docstring)
+        step = cc.step_index[0]
+        for q in range(m):
+            p = ids[q]
+            if cc.in_bed[p] != 0 or (cc.last_contact[p] >= step - 1 and _path_bottom(w, cc, p) < 0.0):
+                cc.active[p] = 1
     k = 0
     for p in range(n):
         if cc.active[p]:
@@ -410,6 +468,45 @@ def _list_pass(cp, comps, grain_of, dcomp, creach, skin, box, n, size, start, co
 
 
 @njit(cache=True, parallel=True)
+def _bed_list_pass(cp, comps, dcomp, creach, skin, centres, box, ncell, size, start, count, order, nbr, cnt):
+    """Append to the row of each listed component the packed bed's spheres (ids −1 − j,
+    diameter 1) within the pair cutoff ½(d_a + 1) + m_a + s, found through the bed's
+    cells (bed.packed.PackedBed, x and z periodic, one layer): as many cells around the
+    component as the cutoff needs, each once. Returns the longest row."""
+    cap = nbr.shape[1]
+    nx, nz = ncell[0], ncell[2]
+    most = np.zeros(comps.shape[0], np.int64)
+    for q in prange(comps.shape[0]):
+        a = comps[q]
+        k = cnt[a]
+        lim = 0.5 * (dcomp[a] + 1.0) + creach[a] + skin
+        if cp[a, 1] - BED_CENTRE_Y < lim:
+            x = cp[a, 0] - box[0] * math.floor(cp[a, 0] / box[0])
+            z = cp[a, 2] - box[2] * math.floor(cp[a, 2] / box[2])
+            ix = min(int(x / size[0]), nx - 1)
+            iz = min(int(z / size[2]), nz - 1)
+            mx = int(math.ceil(lim / size[0]))
+            mz = int(math.ceil(lim / size[2]))
+            x_lo, x_n = (0, nx) if 2 * mx + 1 >= nx else (ix - mx + nx, 2 * mx + 1)
+            z_lo, z_n = (0, nz) if 2 * mz + 1 >= nz else (iz - mz + nz, 2 * mz + 1)
+            for i in range(x_n):
+                for j in range(z_n):
+                    c = ((x_lo + i) % nx) * nz + (z_lo + j) % nz
+                    for m in range(start[c], start[c] + count[c]):
+                        b = order[m]
+                        dx = min_image(cp[a, 0] - centres[b, 0], box[0], 1)
+                        dy = cp[a, 1] - centres[b, 1]
+                        dz = min_image(cp[a, 2] - centres[b, 2], box[2], 1)
+                        if dx * dx + dy * dy + dz * dz < lim * lim:
+                            if k < cap:
+                                nbr[a, k] = -1 - b
+                            k += 1
+        cnt[a] = k
+        most[q] = k
+    return most.max() if comps.shape[0] > 0 else 0
+
+
+@njit(cache=True, parallel=True)
 def _transfer(comps, nbr, cnt, shear, nbr2, cnt2, shear2):
     for q in prange(comps.shape[0]):
         a = comps[q]
@@ -427,8 +524,9 @@ def _transfer(comps, nbr, cnt, shear, nbr2, cnt2, shear2):
 
 
 @njit(cache=True)
-def _build_list(st, cc):
-    """Neighbour list of the active grains' components at their current centres cc.cp,
+def _build_list(st, cc, pb):
+    """Neighbour list of the active grains' components at their current centres cc.cp
+    (with a packed bed ``pb``, bed.packed.PackedBed, its spheres too; None: none),
     history carried over; returns the ClusterContacts to use from now on."""
     na = cc.n_act[0]
     m = 0
@@ -458,6 +556,9 @@ def _build_list(st, cc):
     nbr2, cnt2, shear2 = cc.nbr2, cc.nbr_count2, cc.shear2
     most = _list_pass(cc.cp, comps, cc.grain_of, st.d_comp, creach, skin, box, gn, size, start, count, order,
                       nbr2, cnt2)
+    if pb is not None:
+        most = _bed_list_pass(cc.cp, comps, st.d_comp, creach, skin, pb.centres, pb.box, pb.ncell, pb.size,
+                              pb.cell_start, pb.cell_count, pb.order, nbr2, cnt2)
     spare_nbr, spare_cnt, spare_shear = cc.nbr, cc.nbr_count, cc.shear
     if most > nbr2.shape[1]:
         k = most + most // 4 + 4
@@ -467,6 +568,9 @@ def _build_list(st, cc):
         shear2 = np.zeros((kt, k, 3))
         _list_pass(cc.cp, comps, cc.grain_of, st.d_comp, creach, skin, box, gn, size, start, count, order,
                    nbr2, cnt2)
+        if pb is not None:
+            _bed_list_pass(cc.cp, comps, st.d_comp, creach, skin, pb.centres, pb.box, pb.ncell, pb.size,
+                           pb.cell_start, pb.cell_count, pb.order, nbr2, cnt2)
         spare_nbr = np.zeros((kt, k), np.int64)
         spare_cnt = np.zeros(kt, np.int64)
         spare_shear = np.zeros((kt, k, 3))
@@ -486,7 +590,8 @@ def _build_list(st, cc):
                            spare_shear, cc.partners, cc.n_partners, cc.new_partners, cc.active, cc.act, cc.n_act,
                            cc.touched, cc.reach, cc.phi, cc.x1, cc.dx, cc.dv, cc.dL, cc.dq, cc.dev, cc.P, cc.V,
                            cc.Om, cc.dOm, cc.rot, cc.iw, cc.cp, cc.force, cc.torque, cc.collisions, cc.max_overlap,
-                           cc.overlap_sum, cc.contact_substeps, cc.counters)
+                           cc.overlap_sum, cc.contact_substeps, cc.counters, cc.bed_centres, cc.bed_par, cc.step_t,
+                           cc.step_index, cc.last_contact, cc.in_bed, cc.bed_touch)
 
 
 # ----------------------------------------------------------------------------- poses and forces
@@ -621,16 +726,24 @@ def _grain_force(st, cc, p, h, sig):
     fx = fy = fz = 0.0
     tx = ty = tz = 0.0
     npart = 0
+    nbed = 0
     mp = st.mass[p]
     for a in range(st.cstart[p], st.cstart[p + 1]):
         da = st.d_comp[a]
         for k in range(cc.nbr_count[a]):
             b = cc.nbr[a, k]
-            g = cc.grain_of[b]
-            dsum = 0.5 * (da + st.d_comp[b])
-            delx = min_image(cc.cp[a, 0] - cc.cp[b, 0], lx, 1)
-            dely = cc.cp[a, 1] - cc.cp[b, 1]
-            delz = min_image(cc.cp[a, 2] - cc.cp[b, 2], lz, 1)
+            if b >= 0:  # a component of grain g
+                g = cc.grain_of[b]
+                cb = cc.cp[b]
+                db = st.d_comp[b]
+            else:  # bed sphere −1 − b: fixed, diameter 1
+                g = -1
+                cb = cc.bed_centres[-1 - b]
+                db = 1.0
+            dsum = 0.5 * (da + db)
+            delx = min_image(cc.cp[a, 0] - cb[0], lx, 1)
+            dely = cc.cp[a, 1] - cb[1]
+            delz = min_image(cc.cp[a, 2] - cb[2], lz, 1)
             rsq = delx * delx + dely * dely + delz * delz
             sh = cc.shear[a, k]
             if rsq >= dsum * dsum or rsq == 0.0:
@@ -644,22 +757,30 @@ def _grain_force(st, cc, p, h, sig):
             dlt = dsum - r
             # contact point (middle of the overlap) relative to each centre of mass
             arm_a = 0.5 * da - 0.5 * dlt
-            arm_b = 0.5 * st.d_comp[b] - 0.5 * dlt
             ci0 = cc.cp[a, 0] - cc.P[p, 0] - arm_a * n0
             ci1 = cc.cp[a, 1] - cc.P[p, 1] - arm_a * n1
             ci2 = cc.cp[a, 2] - cc.P[p, 2] - arm_a * n2
-            cj0 = cc.cp[b, 0] - cc.P[g, 0] + arm_b * n0
-            cj1 = cc.cp[b, 1] - cc.P[g, 1] + arm_b * n1
-            cj2 = cc.cp[b, 2] - cc.P[g, 2] + arm_b * n2
-            oi, oj = cc.Om[p], cc.Om[g]
-            vr0 = (cc.V[p, 0] + oi[1] * ci2 - oi[2] * ci1) - (cc.V[g, 0] + oj[1] * cj2 - oj[2] * cj1)
-            vr1 = (cc.V[p, 1] + oi[2] * ci0 - oi[0] * ci2) - (cc.V[g, 1] + oj[2] * cj0 - oj[0] * cj2)
-            vr2 = (cc.V[p, 2] + oi[0] * ci1 - oi[1] * ci0) - (cc.V[g, 2] + oj[0] * cj1 - oj[1] * cj0)
-            mg = st.mass[g]
-            meff = mp * mg / (mp + mg)
+            oi = cc.Om[p]
+            vr0 = cc.V[p, 0] + oi[1] * ci2 - oi[2] * ci1
+            vr1 = cc.V[p, 1] + oi[2] * ci0 - oi[0] * ci2
+            vr2 = cc.V[p, 2] + oi[0] * ci1 - oi[1] * ci0
+            if g >= 0:
+                arm_b = 0.5 * db - 0.5 * dlt
+                cj0 = cb[0] - cc.P[g, 0] + arm_b * n0
+                cj1 = cb[1] - cc.P[g, 1] + arm_b * n1
+                cj2 = cb[2] - cc.P[g, 2] + arm_b * n2
+                oj = cc.Om[g]
+                vr0 -= cc.V[g, 0] + oj[1] * cj2 - oj[2] * cj1
+                vr1 -= cc.V[g, 1] + oj[2] * cj0 - oj[0] * cj2
+                vr2 -= cc.V[g, 2] + oj[0] * cj1 - oj[1] * cj0
+                mg = st.mass[g]
+                c_n = zeta * math.sqrt(mp * mg / (mp + mg) * kn)
+                fric = mu
+            else:  # the fixed partner: m_eff = m, the bed's restitution and friction
+                c_n = cc.bed_par[0] * math.sqrt(mp * kn)
+                fric = cc.bed_par[1]
             fn, ft0, ft1, ft2, sh[0], sh[1], sh[2] = spring_dashpot(
-                n0, n1, n2, dlt, vr0, vr1, vr2, sh[0], sh[1], sh[2], h, update,
-                kn, kt, zeta * math.sqrt(meff * kn), 0.0, mu)
+                n0, n1, n2, dlt, vr0, vr1, vr2, sh[0], sh[1], sh[2], h, update, kn, kt, c_n, 0.0, fric)
             f0 = fn * n0 + ft0
             f1 = fn * n1 + ft1
             f2 = fn * n2 + ft2
@@ -669,6 +790,9 @@ def _grain_force(st, cc, p, h, sig):
             tx += ci1 * f2 - ci2 * f1
             ty += ci2 * f0 - ci0 * f2
             tz += ci0 * f1 - ci1 * f0
+            if g < 0:
+                nbed += 1
+                continue
             if update:
                 if dlt > cc.max_overlap[p]:
                     cc.max_overlap[p] = dlt
@@ -704,6 +828,25 @@ def _grain_force(st, cc, p, h, sig):
         for m in range(npart):
             cc.partners[p, m] = cc.new_partners[p, m]
         cc.n_partners[p] = npart
+        if nbed > 0:
+            cc.touched[p] = 1
+            cc.bed_touch[p] = 1
+            if cc.in_bed[p] == 0:
+                _bed_impact(st, cc, p, cc.step_t[0] + sig * cc.step_t[1])
+        cc.in_bed[p] = 1 if nbed > 0 else 0
+
+
+@njit(cache=True, inline="always")
+def _bed_impact(st, cc, p, t_hit):
+    """A bed contact of grain p begins at t_hit: a bed impact; it ends a jump if the grain
+    was airborne since an earlier step (SPEC §6, as bed/packed_composites.py), and the
+    next jump starts here."""
+    st.impacts[p] += 1
+    if cc.last_contact[p] < cc.step_index[0] - 1:
+        close_jump(st, p, st.jump_t0[p], cc.P[p, 0] - st.jump_x0[p], st.jump_ymax[p], t_hit,
+                   cc.bed_par[2], cc.bed_par[3])
+    st.jump_t0[p] = t_hit
+    st.jump_x0[p] = cc.P[p, 0]
 
 
 @njit(cache=True)
@@ -845,15 +988,31 @@ def _finish_one(st, w, cc, p):
             y = st.pos[p, 1] + rot[1, 0] * st.r_body[k, 0] + rot[1, 1] * st.r_body[k, 1] \
                 + rot[1, 2] * st.r_body[k, 2] - 0.5 * st.d_comp[k]
             low = min(low, y)
+        if cc.bed_touch[p] != 0:
+            # on the bed in this step (bed/packed_composites.py's bookkeeping): a lasting
+            # contact moves the next jump's start along with the grain
+            cc.last_contact[p] = cc.step_index[0]
+            if cc.in_bed[p] != 0:
+                st.jump_t0[p] = cc.step_t[0] + cc.step_t[1]
+                st.jump_x0[p] = st.pos[p, 0]
+            st.jump_ymax[p] = max(low, 0.0)
+        elif low > st.jump_ymax[p]:
+            st.jump_ymax[p] = low
+    elif cc.bed_centres.shape[0] > 0:
+        # untouched, on its free path; the hard bed pass skips it, so its highest point is
+        # kept here, as that pass would (the free flight leaves it to the packed bed)
+        q = st.quat[p]
+        low, _ = _lowest(st, w, p, st.pos[p, 0], st.pos[p, 1], st.pos[p, 2], q[0], q[1], q[2], q[3])
         if low > st.jump_ymax[p]:
             st.jump_ymax[p] = low
 
 
 @njit(cache=True)
-def build_contact_list(st, w, cc, dt):
+def build_contact_list(st, w, cc, dt, pb):
     """Steps 2–3 set-up of the contact phase (module docstring): reach of every grain's
     free path from w.x0 (start) to the state st (end), active grains, their poses at
-    σ = 0 and the component neighbour list. Returns the ClusterContacts to use."""
+    σ = 0 and the component neighbour list (bed spheres of ``pb`` included; None: no
+    packed bed). Returns the ClusterContacts to use."""
     n = st.pos.shape[0]
     _reach(st, w, cc, dt)
     na = _engage(st, w, cc)
@@ -861,6 +1020,7 @@ def build_contact_list(st, w, cc, dt):
     for p in range(n):
         if cc.active[p] == 0:
             cc.n_partners[p] = 0
+            cc.in_bed[p] = 0
             for a in range(st.cstart[p], st.cstart[p + 1]):
                 cc.nbr_count[a] = 0
     if na == 0:
@@ -868,6 +1028,7 @@ def build_contact_list(st, w, cc, dt):
     for q in range(na):
         p = cc.act[q]
         cc.touched[p] = 0
+        cc.bed_touch[p] = 0
         for i in range(3):
             cc.dx[p, i] = 0.0
             cc.dv[p, i] = 0.0
@@ -877,14 +1038,16 @@ def build_contact_list(st, w, cc, dt):
         cc.dq[p, 2] = 0.0
         cc.dq[p, 3] = 0.0
     _poses(st, w, cc, 0.0, dt)
-    return _build_list(st, cc)
+    return _build_list(st, cc, pb)
 
 
 @njit(cache=True)
-def contact_phase(st, w, cc, dt, n_sub):
-    """Grain–grain contacts of one hydrodynamic step of length dt, after the free flight
-    of every grain (module docstring); returns the ClusterContacts to keep."""
-    cc = build_contact_list(st, w, cc, dt)
+def contact_phase(st, w, cc, dt, n_sub, pb):
+    """Grain–grain contacts (and, with a packed bed ``pb``, soft bed contacts; None: none)
+    of one hydrodynamic step of length dt, after the free flight of every grain (module
+    docstring; cc.step_t and cc.step_index name the step); returns the ClusterContacts
+    to keep."""
+    cc = build_contact_list(st, w, cc, dt, pb)
     na = cc.n_act[0]
     if na == 0:
         return cc
@@ -900,7 +1063,7 @@ def contact_phase(st, w, cc, dt, n_sub):
         over = _move_par(sr, wr, cr, h, half_skin, sig, dt) if par else _move_ser(sr, wr, cr, h, half_skin, sig, dt)
         if over > 0:
             cc.counters[OVERRUNS] += over
-            cc = _build_list(st, cc)
+            cc = _build_list(st, cc, pb)
             cr = ClusterContactsRef(*cc)
         if par:
             _force_kick_par(sr, cr, h, sig)
@@ -920,11 +1083,11 @@ def _clock():
 
 
 @njit(cache=True)
-def advance_clusters_contacts(f, coef, bed, seed, st, w, hc, t0, dt, n_steps, top, cc, n_sub, timers):
+def advance_clusters_contacts(f, coef, bed, seed, st, w, hc, t0, dt, n_steps, top, cc, n_sub, timers, pb):
     """flight.composites.advance_clusters with grain–grain contacts: free flight (RK4 + bed) of
-    every grain, then ``contact_phase``, each step; timers += (free flight s, contacts s).
-    Stops early when a grain is not finite or a jump buffer is full. Returns (steps
-    done, the ClusterContacts to keep)."""
+    every grain, then ``contact_phase`` (pb: the packed bed or None), each step;
+    timers += (free flight s, contacts s). Stops early when a grain is not finite or a
+    jump buffer is full. Returns (steps done, the ClusterContacts to keep)."""
     n = st.pos.shape[0]
     cap = st.jump_buf.shape[1]
     k0 = round(t0 / dt)  # the global index of the first step (t0 is always k0 * dt)
@@ -939,7 +1102,10 @@ def advance_clusters_contacts(f, coef, bed, seed, st, w, hc, t0, dt, n_steps, to
                 bad = True
                 break
         if not bad:
-            cc = contact_phase(st, w, cc, dt, n_sub)
+            cc.step_t[0] = t
+            cc.step_t[1] = dt
+            cc.step_index[0] = k0 + s
+            cc = contact_phase(st, w, cc, dt, n_sub, pb)
         c2 = _clock()
         timers[0] += c1 - c0
         timers[1] += c2 - c1

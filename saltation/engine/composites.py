@@ -40,7 +40,12 @@ particles.parquet the collisions and largest overlap of each grain.
 Bed: the virtual bed (flight/composites.py, inside the free-flight kernel, so the timing has no
 separate bed share: ``timing.bed_s`` = 0, said in ``timing.note``) or, with
 bed.model = "packed", the hexagonal layer of fixed spheres of diameter Dn acting on
-every component sphere (bed/packed_composites.py, a pass after each step, timed as bed_s).
+every component sphere (bed/packed_composites.py, a pass after each step, timed as bed_s);
+with soft contacts the grains sub-stepped in the contact phase — among them every grain
+resting or rolling on the bed — have their bed contacts there, as soft contacts
+(contacts/composites.py, "The packed bed"), and that pass skips them. run.start = "rest"
+places each grain, turned by its orientation, on the bed above its own hollow
+(grains/initial.composites_resting; it settles into a stable pose in its first steps).
 
 The run loop — chunked stepping, recorders, checkpoints (every output.checkpoint_every s,
 every 5 % of the steps, on SIGINT/SIGTERM), ``--resume`` bit for bit, progress, summary —
@@ -60,14 +65,15 @@ import numpy as np
 import pandas as pd
 
 from ..bed import packed_composites as cluster_bed
-from ..bed.packed import make_packed_bed
+from ..bed.jumps import BED_MIN_JUMP_DURATION, BED_MIN_JUMP_HEIGHT
+from ..bed.packed import hexagonal_layer, hexagonal_pockets, make_packed_bed
 from ..bed.virtual import run_bed_parameters
 from ..case.schema import Case, CaseError
 from ..contacts import composites as cluster_contacts
 from ..contacts.pairs import contact_model_from_case
 from ..flight import composites as clusters
 from ..grains import shapes
-from ..grains.initial import Y_RANGE, initial_conditions
+from ..grains.initial import Y_RANGE, composites_resting, initial_conditions
 from ..io.writers import ClusterTrackWriter, run_metadata, write_table
 from ..physics.forces import CM
 from .simulation import Simulation, SimulationError
@@ -128,7 +134,8 @@ class ClusterSimulation(Simulation):
         self.bed_s = 0.0
         self.classes, self.axes, self.composites = draw_grains(case, self.n)
         self.class_id = np.array([CLASS_IDS[c] for c in self.classes], dtype=np.int8)
-        self.contacts = case.collisions.model == "soft" and self.n > 1
+        # soft contacts: between grains, and on the packed bed for the grains sub-stepped
+        self.contacts = case.collisions.model == "soft" and (self.n > 1 or self.packed)
         self.cc = None
         self.n_sub = 1
         self.timers = np.zeros(2)
@@ -137,9 +144,14 @@ class ClusterSimulation(Simulation):
     def _initial_state(self):
         c = self.case
         pos, vel, spin = initial_conditions(self.n, self.domain_d, c.run.seed, c.run.release_height)
-        if self.contacts:
-            pos = self._centres_apart(pos)
         quat = random_quaternions(self.n, np.random.default_rng([int(c.run.seed), 7]))
+        resting = c.run.start == "rest"
+        if resting:
+            pos = self._centres_resting(quat)
+            vel[:] = 0.0
+            spin[:] = 0.0
+        elif self.contacts:
+            pos = self._centres_apart(pos)
         st = clusters.make_cluster_state(self.composites, pos, vel, quat, spin, 0.0, self.n_window,
                                          R=c.submerged_specific_gravity, Cm=self.coef[CM],
                                          re_star=self.re_star, jump_capacity=JUMP_CAPACITY,
@@ -147,7 +159,7 @@ class ClusterSimulation(Simulation):
                                          wake_shielding=c.forces.wake_shielding)
         low = clusters.lowest_points(st)
         lift = np.maximum(MIN_START_BOTTOM - low, 0.0)
-        if np.any(lift > 0):
+        if np.any(lift > 0) and not resting:
             st.pos[:, 1] += lift
             st.jump_ymax[:] = clusters.lowest_points(st)
         return st
@@ -169,6 +181,11 @@ class ClusterSimulation(Simulation):
         except ValueError as err:
             raise CaseError(str(err), "run", "domain") from err
         self.n_sub = cluster_contacts.substeps(st, kn, self.dt, cc.steps_per_contact)
+        if self.packed:
+            b = self.bed  # bed/virtual.run_bed_parameters: e, f, ..., the jump thresholds
+            self.cc = cluster_contacts.with_packed_bed(self.cc, self.pb, b[0], b[1],
+                                                       (b[BED_MIN_JUMP_DURATION], b[BED_MIN_JUMP_HEIGHT]),
+                                                       self.last_contact)
         self.mu_min = float(cluster_contacts.point_effective_masses(st).min())
 
     def _advance_composites(self, f, st, w, seed, t0, n):
@@ -177,15 +194,18 @@ class ClusterSimulation(Simulation):
         # packed bed: after each step's move (free flight, contacts), bed/packed_composites.py
         step0 = int(round(t0 / self.dt))
         cap = st.jump_buf.shape[1]
-        if n == 0:  # compile call: the state is above the bed, nothing happens
+        # the grains sub-stepped in the contact phase had their bed contacts there (soft)
+        skip = self.cc.active if self.cc is not None else np.zeros(self.n, np.uint8)
+        if n == 0:  # compile call: nothing moves
             self._advance_flight(f, st, w, seed, t0, 0)
-            cluster_bed.packed_bed_pass(st, w, t0, self.dt, step0 - 1, self.bed, self.pb, self.last_contact)
+            cluster_bed.packed_bed_pass(st, w, t0, self.dt, step0 - 1, self.bed, self.pb, self.last_contact,
+                                        np.ones(self.n, np.uint8))
             return 0
         for s in range(n):
             t = (step0 + s) * self.dt  # from the global step index (as the kernels)
             done = self._advance_flight(f, st, w, seed, t, 1)
             c0 = time.perf_counter()
-            cluster_bed.packed_bed_pass(st, w, t, self.dt, step0 + s, self.bed, self.pb, self.last_contact)
+            cluster_bed.packed_bed_pass(st, w, t, self.dt, step0 + s, self.bed, self.pb, self.last_contact, skip)
             self.bed_s += time.perf_counter() - c0
             if done < 1 or np.any(st.status != clusters.OK) or np.any(st.jump_buf_n >= cap):
                 return s + 1
@@ -197,8 +217,22 @@ class ClusterSimulation(Simulation):
                                                  n, self.top_d))
         done, self.cc = cluster_contacts.advance_clusters_contacts(
             f, self.coef, self.bed, seed, st, w, self.hist_coef, t0, self.dt, n, self.top_d, self.cc, self.n_sub,
-            self.timers)
+            self.timers, self.pb)
         return int(done)
+
+    def _centres_resting(self, quat):
+        """Start positions for run.start = "rest": each grain, turned by its orientation,
+        lowered onto the packed bed above its own hollow (grains/initial.composites_resting);
+        it then settles into a stable pose under its weight in the first steps."""
+        lx, lz = self.domain_d
+        offsets = [g.centres @ clusters.quat_to_matrix_py(q).T for g, q in zip(self.composites, quat)]
+        radii = [0.5 * np.asarray(g.diameters) for g in self.composites]
+        try:
+            return composites_resting(offsets, radii, hexagonal_pockets(lx, lz), hexagonal_layer(lx, lz)[0],
+                                      self.domain_d, int(self.case.run.seed))
+        except ValueError as err:
+            raise CaseError(f'run.start = "rest": {err}; lower run.n_particles or enlarge run.domain',
+                            "run", "n_particles") from None
 
     def _centres_apart(self, pos):
         """Start positions for runs with grain–grain contacts: no two bounding spheres
@@ -233,14 +267,16 @@ class ClusterSimulation(Simulation):
     def _start(self, st, resumed: bool):
         """Contacts and packed bed for the state; on resume their arrays from the checkpoint
         (the contact state whole: its lists may have grown)."""
-        if self.contacts:
-            self._contact_setup(st)
         if self.packed:
             lx, lz = self.domain_d
             try:
                 self.pb = make_packed_bed(lx, lz, cluster_bed.cut_for(st))
             except ValueError as err:
                 raise CaseError(str(err), "run", "domain") from err
+            if self.case.run.start == "rest":
+                self.last_contact[:] = -1  # placed on the bed: in lasting contact from the first step
+        if self.contacts:
+            self._contact_setup(st)
         if resumed:
             saved = self._saved
             if self.cc is not None:
@@ -249,6 +285,9 @@ class ClusterSimulation(Simulation):
             self.last_contact[:] = saved["last_contact"]
             self.timers[:] = saved["timers"]
             self.bed_s = float(saved["bed_s"][0])
+        if self.cc is not None and self.packed:
+            # the bed pass and the contact phase share one last_contact array
+            self.cc = self.cc._replace(last_contact=self.last_contact)
 
     def _advance(self, f, st, ws, t0, n, step0) -> int:
         return self._advance_composites(f, st, ws, int(self.case.run.seed), t0, n)

@@ -97,3 +97,57 @@ def initial_conditions_resting(n: int, pockets, domain_d, seed: int, min_gap: fl
                          f"in separate hollows, fewer than the {n} asked for")
     pos = pockets[np.array(taken)].copy()
     return pos, np.zeros((n, 3)), np.zeros((n, 3))
+
+
+def composites_resting(offsets, radii, pockets, bed_centres, domain_d, seed: int, gap: float = 1e-3):
+    """Centres (N, 3) of N bonded-sphere grains placed on the packed bed (bed sphere
+    diameter 1): grain i — component centres ``offsets[i]`` (k, 3) from its centre, in
+    the world frame (its orientation applied), radii ``radii[i]`` (k,) — goes above the
+    next hollow of ``pockets`` (bed.packed.hexagonal_pockets) in a random order (PCG64,
+    the case seed), is lowered until its first component touches a bed sphere and is
+    raised by ``gap``; the hollow is taken when the grain clears every grain placed by
+    ``gap`` (minimum image in x, z), else the next one is tried. The grains then settle
+    under their weight (tipping into a stable pose). Raises ValueError when the bed has
+    room for fewer than N grains."""
+    lx, lz = domain_d
+    pockets = np.asarray(pockets, dtype=np.float64)
+    bed = np.asarray(bed_centres, dtype=np.float64)
+    order = np.random.default_rng(seed).permutation(len(pockets))
+    n = len(offsets)
+    out = np.zeros((n, 3))
+    placed_c, placed_r = np.zeros((0, 3)), np.zeros(0)
+    i = 0
+    for k in order:
+        if i == n:
+            break
+        off = np.asarray(offsets[i], dtype=np.float64)
+        rad = np.asarray(radii[i], dtype=np.float64)
+        x, z = pockets[k, 0], pockets[k, 2]
+        dx = x + off[:, 0, None] - bed[None, :, 0]
+        dz = z + off[:, 2, None] - bed[None, :, 2]
+        dx -= lx * np.round(dx / lx)
+        dz -= lz * np.round(dz / lz)
+        reach = rad[:, None] + 0.5
+        h2 = dx * dx + dz * dz
+        under = h2 < reach * reach
+        if not under.any():
+            continue
+        # the height at which each component would touch each bed sphere beneath it
+        need = np.where(under, bed[None, :, 1] + np.sqrt(np.maximum(reach * reach - h2, 0.0)) - off[:, 1, None],
+                        -np.inf)
+        centre = np.array([x, need.max() + gap, z])
+        comps = centre + off
+        if len(placed_r):
+            d = comps[:, None, :] - placed_c[None, :, :]
+            d[..., 0] -= lx * np.round(d[..., 0] / lx)
+            d[..., 2] -= lz * np.round(d[..., 2] / lz)
+            if np.any(np.sqrt((d * d).sum(axis=2)) < rad[:, None] + placed_r[None, :] + gap):
+                continue
+        out[i] = centre
+        placed_c = np.vstack([placed_c, comps])
+        placed_r = np.concatenate([placed_r, rad])
+        i += 1
+    if i < n:
+        raise ValueError(f"the packed bed of {lx:.4g} x {lz:.4g} d has room for {i} of these grains at rest "
+                         f"in separate hollows, fewer than the {n} asked for")
+    return out

@@ -48,6 +48,10 @@ DEFAULT_RATIOS = (0.4, 0.55, 0.7, 0.85, 1.0, 1.2, 1.5)  # τ* / (Shields-curve �
 DEFAULT_WIDTH = (20.0, 12.0)  # bed Lx, Lz in d
 DEFAULT_COVERAGE = 0.4  # grains at rest per bed sphere (random filling of the hollows holds ~0.45)
 DEFAULT_DURATION = 200.0  # d/u* per τ*
+# bonded-sphere grains are placed on the bed by a drop (grains/initial.composites_resting)
+# and tip into a stable pose in their first d/u* or so: the first SETTLE_COMPOSITES d/u*
+# of their runs are not measured (spheres start in equilibrium in their hollows: none)
+SETTLE_COMPOSITES = 10.0
 FORMULAS = {  # q* = a (τ* − τ*c)^1.5; τ*c None: the Shields curve's
     "Meyer-Peter & Müller 1948": (8.0, 0.047),
     "Wong & Parker 2006": (3.97, 0.0495),
@@ -127,15 +131,19 @@ def motion_statistics(tracks: pd.DataFrame, moving_speed=MOVING_SPEED) -> dict:
             "step_cv": float(steps.std() / steps.mean()) if len(steps) > 1 and steps.mean() != 0 else None}
 
 
-def displacement_rate(tracks: pd.DataFrame, area: float) -> float:
-    """q in particle units (u* d): Σ_p (π/6)(x_p(T) − x_p(0)) / (area · T), x unwrapped,
-    from each grain's first to last track sample (module docstring)."""
+def displacement_rate(tracks: pd.DataFrame, area: float, volumes=None) -> float:
+    """q in particle units (u* d): Σ_p V_p (x_p(T) − x_p(0)) / (area · T), x unwrapped,
+    from each grain's first to last track sample (module docstring); V_p = π/6 (a
+    sphere of d) or ``volumes`` (a Series indexed by particle, d³: bonded-sphere grains)."""
     g = tracks.sort_values("t").groupby("particle")
     first, last = g.first(), g.last()
     span = float((last["t"] - first["t"]).max())
     if not span > 0:
         raise ValueError("displacement_rate: the tracks span no time; run longer")
-    return float((math.pi / 6.0) * (last["x"] - first["x"]).sum() / (area * span))
+    dx = last["x"] - first["x"]
+    if volumes is None:
+        return float((math.pi / 6.0) * dx.sum() / (area * span))
+    return float((volumes.reindex(dx.index).to_numpy() * dx.to_numpy()).sum() / (area * span))
 
 
 def tail_shape(samples, minimum=30):
@@ -154,11 +162,13 @@ def tail_shape(samples, minimum=30):
 
 
 def threshold_study(case, out, *, ratios=DEFAULT_RATIOS, tau_stars=None, width_d=DEFAULT_WIDTH,
-                    coverage=DEFAULT_COVERAGE, duration_d=DEFAULT_DURATION, overrides=None, progress=True,
-                    echo=print) -> dict:
+                    coverage=DEFAULT_COVERAGE, duration_d=DEFAULT_DURATION, settle_d=None, overrides=None,
+                    progress=True, echo=print) -> dict:
     """Run the series (module docstring) into ``out``/tau_<τ*>/ and write
-    ``out``/threshold.json (and threshold.csv, threshold.png). Finished runs in ``out``
-    are reused (a rerun continues where an interrupted study stopped)."""
+    ``out``/threshold.json (and threshold.csv, threshold.png). Each run lasts
+    ``settle_d`` + ``duration_d`` d/u*; only the last ``duration_d`` are measured
+    (settle_d None: 0 for spheres, SETTLE_COMPOSITES for bonded-sphere grains). Finished
+    runs in ``out`` are reused (a rerun continues where an interrupted study stopped)."""
     from ..analysis.transport import ackers_white, bulk_velocity_plus, einstein_number
     from ..bed.packed import hexagonal_layer
     from ..case.schema import GRAVITY, load_case
@@ -171,6 +181,8 @@ def threshold_study(case, out, *, ratios=DEFAULT_RATIOS, tau_stars=None, width_d
     R = base.submerged_specific_gravity
     nu = base.fluid.viscosity
     dstar = d_star(d, R, nu)
+    if settle_d is None:
+        settle_d = 0.0 if base.particle.shape == "sphere" else SETTLE_COMPOSITES
     theta_cr = shields_soulsby(dstar)
     series = sorted(float(t) for t in (tau_stars if tau_stars is not None else [r * theta_cr for r in ratios]))
     lx, lz = (float(w) for w in width_d)
@@ -184,7 +196,7 @@ def threshold_study(case, out, *, ratios=DEFAULT_RATIOS, tau_stars=None, width_d
         u_star = math.sqrt(ts * R * GRAVITY * d)
         time_scale = d / u_star
         sets = {"run.start": "rest", "run.n_particles": n,
-                "run.domain": [lx * d, lz * d, 50 * d], "run.duration": duration_d * time_scale,
+                "run.domain": [lx * d, lz * d, 50 * d], "run.duration": (settle_d + duration_d) * time_scale,
                 "run.name": f"tau_{ts:.5f}", "output.vtk": False, "output.variance": False}
         sets.update(overrides or {})
         sets["flow.tau_ratio"] = ts / tau_c_key  # the series' own τ*
@@ -198,8 +210,13 @@ def threshold_study(case, out, *, ratios=DEFAULT_RATIOS, tau_stars=None, width_d
                  f"{duration_d:g} d/u* ...")
             res = run(case, out=rd, progress=progress, overwrite=rd.exists(), **sets)
             tracks = res.tracks
+        tracks = tracks[tracks["t"] >= settle_d * (1.0 - 1e-9)]
+        volumes = None
+        if base.particle.shape != "sphere":
+            volumes = pd.read_parquet(rd / "particles.parquet", columns=["particle", "volume"]).set_index(
+                "particle")["volume"]
         area = lx * lz
-        q_star = einstein_number(displacement_rate(tracks, area), ts)
+        q_star = einstein_number(displacement_rate(tracks, area, volumes), ts)
         ms = motion_statistics(tracks)
         stats[ts] = ms
         row = {"tau_star": ts, "tau_ratio_shields": ts / theta_cr, "q_star": q_star,
@@ -223,6 +240,7 @@ def threshold_study(case, out, *, ratios=DEFAULT_RATIOS, tau_stars=None, width_d
         "diameter_m": d, "d_star": dstar, "shields_soulsby_whitehouse_1997": theta_cr,
         "tau_star_c_over_shields": None if tau_c is None else tau_c / theta_cr,
         "grains": n, "bed_spheres": n_bed, "bed_d": [lx, lz], "duration_d_u": duration_d,
+        "settle_d_u": settle_d, "shape": base.particle.shape,
         "flow": {"source": base.flow.source, "dataset": str(getattr(ds, "path", ""))},
         "table": table.to_dict(orient="records"),
         "rest_times": tail_shape(rest_all), "step_lengths": tail_shape(np.abs(step_all)),
