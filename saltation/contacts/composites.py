@@ -121,7 +121,7 @@ import numpy as np
 from numba import njit, objmode, prange
 
 from ..bed.jumps import close_jump
-from ..bed.packed import BED_CENTRE_Y
+from ..bed.packed import BED_CENTRE_Y, bed_cell, bed_offset
 from ..flight.composites import (
     CHUNK,
     OK,
@@ -468,38 +468,35 @@ def _list_pass(cp, comps, grain_of, dcomp, creach, skin, box, n, size, start, co
 
 
 @njit(cache=True, parallel=True)
-def _bed_list_pass(cp, comps, dcomp, creach, skin, centres, box, ncell, size, start, count, order, nbr, cnt):
+def _bed_list_pass(cp, comps, dcomp, creach, skin, pb, nbr, cnt):
     """Append to the row of each listed component the packed bed's spheres (ids −1 − j,
     diameter 1) within the pair cutoff ½(d_a + 1) + m_a + s, found through the bed's
-    cells (bed.packed.PackedBed, x and z periodic, one layer): as many cells around the
-    component as the cutoff needs, each once. Returns the longest row."""
+    cells (bed.packed.PackedBed ``pb``, x and z periodic, one layer): as many cells around
+    the component as the cutoff needs, each once. Only reads go through ``pb``: the
+    writes are to plain arrays (a prange body's writes through a named tuple can be
+    lost). Returns the longest row."""
     cap = nbr.shape[1]
-    nx, nz = ncell[0], ncell[2]
+    nx, nz = pb.ncell[0], pb.ncell[2]
     most = np.zeros(comps.shape[0], np.int64)
     for q in prange(comps.shape[0]):
         a = comps[q]
         k = cnt[a]
         lim = 0.5 * (dcomp[a] + 1.0) + creach[a] + skin
         if cp[a, 1] - BED_CENTRE_Y < lim:
-            x = cp[a, 0] - box[0] * math.floor(cp[a, 0] / box[0])
-            z = cp[a, 2] - box[2] * math.floor(cp[a, 2] / box[2])
-            ix = min(int(x / size[0]), nx - 1)
-            iz = min(int(z / size[2]), nz - 1)
-            mx = int(math.ceil(lim / size[0]))
-            mz = int(math.ceil(lim / size[2]))
+            ix, iz = bed_cell(pb, cp[a, 0], cp[a, 2])
+            mx = int(math.ceil(lim / pb.size[0]))
+            mz = int(math.ceil(lim / pb.size[2]))
             x_lo, x_n = (0, nx) if 2 * mx + 1 >= nx else (ix - mx + nx, 2 * mx + 1)
             z_lo, z_n = (0, nz) if 2 * mz + 1 >= nz else (iz - mz + nz, 2 * mz + 1)
             for i in range(x_n):
                 for j in range(z_n):
                     c = ((x_lo + i) % nx) * nz + (z_lo + j) % nz
-                    for m in range(start[c], start[c] + count[c]):
-                        b = order[m]
-                        dx = min_image(cp[a, 0] - centres[b, 0], box[0], 1)
-                        dy = cp[a, 1] - centres[b, 1]
-                        dz = min_image(cp[a, 2] - centres[b, 2], box[2], 1)
+                    for m in range(pb.cell_start[c], pb.cell_start[c] + pb.cell_count[c]):
+                        j_bed = pb.order[m]
+                        dx, dy, dz = bed_offset(pb, j_bed, cp[a, 0], cp[a, 1], cp[a, 2])
                         if dx * dx + dy * dy + dz * dz < lim * lim:
                             if k < cap:
-                                nbr[a, k] = -1 - b
+                                nbr[a, k] = -1 - j_bed
                             k += 1
         cnt[a] = k
         most[q] = k
@@ -557,8 +554,7 @@ def _build_list(st, cc, pb):
     most = _list_pass(cc.cp, comps, cc.grain_of, st.d_comp, creach, skin, box, gn, size, start, count, order,
                       nbr2, cnt2)
     if pb is not None:
-        most = _bed_list_pass(cc.cp, comps, st.d_comp, creach, skin, pb.centres, pb.box, pb.ncell, pb.size,
-                              pb.cell_start, pb.cell_count, pb.order, nbr2, cnt2)
+        most = _bed_list_pass(cc.cp, comps, st.d_comp, creach, skin, pb, nbr2, cnt2)
     spare_nbr, spare_cnt, spare_shear = cc.nbr, cc.nbr_count, cc.shear
     if most > nbr2.shape[1]:
         k = most + most // 4 + 4
@@ -569,8 +565,7 @@ def _build_list(st, cc, pb):
         _list_pass(cc.cp, comps, cc.grain_of, st.d_comp, creach, skin, box, gn, size, start, count, order,
                    nbr2, cnt2)
         if pb is not None:
-            _bed_list_pass(cc.cp, comps, st.d_comp, creach, skin, pb.centres, pb.box, pb.ncell, pb.size,
-                           pb.cell_start, pb.cell_count, pb.order, nbr2, cnt2)
+            _bed_list_pass(cc.cp, comps, st.d_comp, creach, skin, pb, nbr2, cnt2)
         spare_nbr = np.zeros((kt, k), np.int64)
         spare_cnt = np.zeros(kt, np.int64)
         spare_shear = np.zeros((kt, k, 3))
