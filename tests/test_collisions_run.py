@@ -102,6 +102,37 @@ def test_a_grain_not_engaged_is_woken_when_a_deflected_grain_hits_it():
     np.testing.assert_allclose(st.vel.sum(axis=0), p_total, atol=1e-9)
 
 
+def test_the_jump_height_follows_a_grain_whether_or_not_the_contact_phase_took_it():
+    """Two grains rising side by side, 0.002 d apart and separating: near enough to be
+    taken into the contact phase by its coarse test, never touching. The bed pass (here:
+    its jump-height update) skips the grains the phase took, so the phase must keep their
+    jump's highest point; before issue 19 it kept it only for grains that touched
+    something, and a grain sub-stepped through its apex kept its last bed contact's."""
+    model = K.make_contact_model(5e5, 0.65, 0.3)
+    dt, n_sub = 0.02, 128
+    pos0 = np.array([[5.0, 3.0, 5.0], [5.0 + 1.002, 3.0, 5.0]])
+    vel0 = np.array([[-0.1, 2.0, 0.0], [0.1, 2.0, 0.0]])
+    st = make_state(pos0, vel0, np.zeros((2, 3)), 0.0, 4)
+    st.jump_ymax[:] = 3.0
+    ws = make_workspace(2)
+    cl = K.make_contact_list(st.pos, (12.0, 8.0, 12.0), (True, False, True), 1.0, 0.5)
+    ph = make_contact_phase(2)
+    bc = make_bed_context(2, False, make_packed_bed(3.0, 3.0), 0.65, 0.1, 0.5, model.kn, model.kt, 0,
+                          np.full(2, -2, np.int64))
+    cs = empty_substep_set()
+    for s in range(3):
+        ws.x0[:, 0:3] = st.pos
+        ws.x0[:, 3:6] = st.vel
+        ws.x0[:, 6:9] = st.spin
+        st.pos[:] += dt * st.vel
+        cl, cs = soft_contact_phase(st, ws.x0, model, cl, ph, bc, s * dt, s, dt, n_sub, cs)
+        for p in range(2):
+            if ph.active[p] == 0:  # what the bed pass does for the grains it does not skip
+                st.jump_ymax[p] = max(st.jump_ymax[p], st.pos[p, 1])
+        np.testing.assert_array_equal(st.jump_ymax, st.pos[:, 1])
+    assert cl.collisions.sum() == 0
+
+
 # ----------------------------------------------------------------------------- runs
 
 

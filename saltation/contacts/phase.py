@@ -1492,15 +1492,17 @@ def _scatter(cs, st, cl, bc, ph, skin_half):
         st.jump_ymax[g] = cs.jump_ymax[a]
         if ph.ref_bound[g] + math.sqrt(cs.dev_max[a]) > skin_half:
             over += 1
-        if cs.touched[a] == 0:
-            continue
-        for c in range(3):
-            pos[g, c] += cs.dev[a, c]
-            vel[g, c] += cs.dev[a, 3 + c]
-            spin[g, c] += cs.dev[a, 6 + c]
-        st.fresh[g] = 0
-        history_mark_impact(st.hist_meta[g])  # the next step takes the slip step (physics/history.py)
-        if pos[g, 1] > st.jump_ymax[g]:  # the bed pass skips the grains sub-stepped here
+        if cs.touched[a] != 0:
+            for c in range(3):
+                pos[g, c] += cs.dev[a, c]
+                vel[g, c] += cs.dev[a, 3 + c]
+                spin[g, c] += cs.dev[a, 6 + c]
+            st.fresh[g] = 0
+            history_mark_impact(st.hist_meta[g])  # the next step takes the slip step (physics/history.py)
+        # the bed pass skips the grains sub-stepped here, touched or not: the jump's highest
+        # point is kept here (a grain sub-stepped through its apex without a contact kept the
+        # height of its last bed contact before)
+        if pos[g, 1] > st.jump_ymax[g]:
             st.jump_ymax[g] = pos[g, 1]
     ph.n_act[0] = na
     return over
