@@ -293,6 +293,24 @@ def min_image(dx, length, periodic):
     return dx
 
 
+@njit(cache=True, inline="always")
+def _layer_gaps(x, k, n, size, length, periodic, l0, l1, l2):
+    """Lower bounds on the distance along one axis from a grain at x (in layer k) to each of
+    the stencil layers l0, l1, l2 of ``_layers`` (0 for its own layer): a neighbouring
+    layer is as far as the grain is from the cell's face towards it. Periodic axes of
+    fewer than 3 layers: 0 (a layer is a neighbour on both sides)."""
+    if periodic:
+        if n < 3:
+            return 0.0, 0.0, 0.0
+        f = (x - length * math.floor(x / length)) - k * size
+        return max(0.0, f), 0.0, max(0.0, size - f)  # layers k − 1, k, k + 1
+    f = x - k * size  # < 0 or > size for a grain clamped into the bottom or top layer
+    g0 = max(0.0, f) if l0 < k else (max(0.0, size - f) if l0 > k else 0.0)
+    g1 = max(0.0, f) if l1 < k else (max(0.0, size - f) if l1 > k else 0.0)
+    g2 = max(0.0, f) if l2 < k else (max(0.0, size - f) if l2 > k else 0.0)
+    return g0, g1, g2
+
+
 @njit(cache=True, parallel=True)
 def build_neighbour_list(pos, grid, cell_of, cell_start, cell_count, order, cutoff, nbr, nbr_count):
     """Full neighbour list: every j ≠ i with |x_i − x_j| < cutoff (minimum image).
@@ -305,7 +323,10 @@ def build_neighbour_list(pos, grid, cell_of, cell_start, cell_count, order, cuto
     Works cell by cell (parallel over cells; a grain belongs to one cell, so each row is
     written by one iteration) on a copy of the positions in cell order: marching through
     the cells reads the stencil's cells and grains from nearby memory whatever the
-    order of the grains in the caller's arrays.
+    order of the grains in the caller's arrays. A stencil cell farther from the grain than
+    the cutoff (by its distance to the cell's faces, _layer_gaps) is not searched: the
+    cells are sized for the widest skin, ~1.5 cutoffs, and most of the 27 hold no
+    neighbour (the same list, ~2.5× fewer distances).
     """
     n = pos.shape[0]
     cap = nbr.shape[1]
@@ -324,18 +345,25 @@ def build_neighbour_list(pos, grid, cell_of, cell_start, cell_count, order, cuto
     for ci in prange(n_cells):
         if cell_count[ci] == 0:
             continue
-        mx, x0, x1, x2 = _layers(ci // (ny * nz), nx, px)
-        my, y0, y1, y2 = _layers((ci // nz) % ny, ny, py)
-        mz, z0, z1, z2 = _layers(ci % nz, nz, pz)
+        kx, ky, kz = ci // (ny * nz), (ci // nz) % ny, ci % nz
+        mx, x0, x1, x2 = _layers(kx, nx, px)
+        my, y0, y1, y2 = _layers(ky, ny, py)
+        mz, z0, z1, z2 = _layers(kz, nz, pz)
         most = 0
         for qi in range(cell_start[ci], cell_start[ci] + cell_count[ci]):
             i = order[qi]
             xi, yi, zi = sorted_pos[qi, 0], sorted_pos[qi, 1], sorted_pos[qi, 2]
+            gx0, gx1, gx2 = _layer_gaps(xi, kx, nx, grid.size[0], lx, px, x0, x1, x2)
+            gy0, gy1, gy2 = _layer_gaps(yi, ky, ny, grid.size[1], ly, py, y0, y1, y2)
+            gz0, gz1, gz2 = _layer_gaps(zi, kz, nz, grid.size[2], lz, pz, z0, z1, z2)
             cnt = 0
             for s in range(mx * my * mz):
                 g = s % mz
                 b = (s // mz) % my
                 a = s // (mz * my)
+                gap2 = _pick(a, gx0, gx1, gx2) ** 2 + _pick(b, gy0, gy1, gy2) ** 2 + _pick(g, gz0, gz1, gz2) ** 2
+                if gap2 > rc2 * (1.0 + 1e-9):
+                    continue  # no grain of that cell within the cutoff
                 c = (_pick(a, x0, x1, x2) * ny + _pick(b, y0, y1, y2)) * nz + _pick(g, z0, z1, z2)
                 for q in range(cell_start[c], cell_start[c] + cell_count[c]):
                     if q == qi:

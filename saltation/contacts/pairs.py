@@ -286,17 +286,21 @@ def make_contact_list(pos, box, periodic=(True, False, True), diameter=1.0, skin
 
 @njit(cache=True, parallel=True)
 def _transfer_history(nbr, nbr_count, shear, touch, nbr2, nbr_count2, shear2, touch2):
-    """History of the old list (nbr, ...) carried into the new one (nbr2, ...) by id."""
+    """History of the old list (nbr, ...) carried into the new one (nbr2, ...) by id. Only
+    entries in contact (or with a spring left) carry any: the others are looked up not
+    at all (a row holds ~20 neighbours, ~0.1 of them touching)."""
     for i in prange(nbr2.shape[0]):
-        m_old = nbr_count[i]
         for k in range(nbr_count2[i]):
-            j = nbr2[i, k]
             touch2[i, k] = 0
             shear2[i, k, 0] = 0.0
             shear2[i, k, 1] = 0.0
             shear2[i, k, 2] = 0.0
-            for q in range(m_old):
-                if nbr[i, q] == j:
+        for q in range(nbr_count[i]):
+            if touch[i, q] == 0 and shear[i, q, 0] == 0.0 and shear[i, q, 1] == 0.0 and shear[i, q, 2] == 0.0:
+                continue
+            j = nbr[i, q]
+            for k in range(nbr_count2[i]):
+                if nbr2[i, k] == j:
                     touch2[i, k] = touch[i, q]
                     shear2[i, k, 0] = shear[i, q, 0]
                     shear2[i, k, 1] = shear[i, q, 1]
