@@ -39,6 +39,28 @@ def small_case(model="soft", n=400, duration=0.15, bed="virtual", seed=3, source
 # ----------------------------------------------------------------------------- kernel
 
 
+def _straight_steps(st, model, skin, dt, n_sub, steps, after_step=None):
+    """``steps`` steps of free flight without forces (straight paths) and the soft contact
+    phase, virtual bed, in a 12 × 8 × 12 d box; ``after_step(ph)`` after each. Returns the
+    ContactList and the ContactPhase."""
+    n = st.pos.shape[0]
+    ws = make_workspace(n)
+    cl = K.make_contact_list(st.pos, (12.0, 8.0, 12.0), (True, False, True), 1.0, skin)
+    ph = make_contact_phase(n)
+    bc = make_bed_context(n, False, make_packed_bed(3.0, 3.0), 0.65, 0.1, 0.5, model.kn, model.kt, 0,
+                          np.full(n, -2, np.int64))
+    cs = empty_substep_set()
+    for s in range(steps):
+        ws.x0[:, 0:3] = st.pos
+        ws.x0[:, 3:6] = st.vel
+        ws.x0[:, 6:9] = st.spin
+        st.pos[:] += dt * st.vel
+        cl, cs = soft_contact_phase(st, ws.x0, model, cl, ph, bc, s * dt, s, dt, n_sub, cs)
+        if after_step is not None:
+            after_step(ph)
+    return cl, ph
+
+
 def test_contact_phase_reproduces_velocity_verlet_on_straight_paths():
     """No fluid force: the free flight is a straight line, so the contact phase (Hermite
     path + deviation) must give what contacts.pairs.advance_granular gives for the same
@@ -84,19 +106,8 @@ def test_a_grain_not_engaged_is_woken_when_a_deflected_grain_hits_it():
     pos0 = np.array([[5.0, 3.0, 5.0], [5.0 - 1.05, 3.0, 5.0], [5.0 + 1.0 + 0.1, 3.0, 5.0]])
     vel0 = np.array([[0.0, 0.0, 0.0], [12.0, 0.0, 0.0], [0.0, 0.0, 0.0]])
     st = make_state(pos0, vel0, np.zeros((3, 3)), 0.0, 4)
-    ws = make_workspace(3)
-    cl = K.make_contact_list(st.pos, (12.0, 8.0, 12.0), (True, False, True), 1.0, 0.6)
-    ph = make_contact_phase(3)
-    bc = make_bed_context(3, False, make_packed_bed(3.0, 3.0), 0.65, 0.1, 0.5, model.kn, model.kt, 0,
-                          np.full(3, -2, np.int64))
     p_total = st.vel.sum(axis=0).copy()
-    cs = empty_substep_set()
-    for s in range(3):
-        ws.x0[:, 0:3] = st.pos
-        ws.x0[:, 3:6] = st.vel
-        ws.x0[:, 6:9] = st.spin
-        st.pos[:] += dt * st.vel
-        cl, cs = soft_contact_phase(st, ws.x0, model, cl, ph, bc, s * dt, s, dt, n_sub, cs)
+    cl, ph = _straight_steps(st, model, 0.6, dt, n_sub, 3)
     assert ph.counters[2] >= 1  # a wake-up happened
     assert st.vel[2, 0] > 1.0  # grain 2 was hit
     np.testing.assert_allclose(st.vel.sum(axis=0), p_total, atol=1e-9)
@@ -114,22 +125,14 @@ def test_the_jump_height_follows_a_grain_whether_or_not_the_contact_phase_took_i
     vel0 = np.array([[-0.1, 2.0, 0.0], [0.1, 2.0, 0.0]])
     st = make_state(pos0, vel0, np.zeros((2, 3)), 0.0, 4)
     st.jump_ymax[:] = 3.0
-    ws = make_workspace(2)
-    cl = K.make_contact_list(st.pos, (12.0, 8.0, 12.0), (True, False, True), 1.0, 0.5)
-    ph = make_contact_phase(2)
-    bc = make_bed_context(2, False, make_packed_bed(3.0, 3.0), 0.65, 0.1, 0.5, model.kn, model.kt, 0,
-                          np.full(2, -2, np.int64))
-    cs = empty_substep_set()
-    for s in range(3):
-        ws.x0[:, 0:3] = st.pos
-        ws.x0[:, 3:6] = st.vel
-        ws.x0[:, 6:9] = st.spin
-        st.pos[:] += dt * st.vel
-        cl, cs = soft_contact_phase(st, ws.x0, model, cl, ph, bc, s * dt, s, dt, n_sub, cs)
+
+    def after_step(ph):
         for p in range(2):
             if ph.active[p] == 0:  # what the bed pass does for the grains it does not skip
                 st.jump_ymax[p] = max(st.jump_ymax[p], st.pos[p, 1])
         np.testing.assert_array_equal(st.jump_ymax, st.pos[:, 1])
+
+    cl, _ = _straight_steps(st, model, 0.5, dt, n_sub, 3, after_step)
     assert cl.collisions.sum() == 0
 
 

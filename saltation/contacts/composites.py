@@ -138,6 +138,7 @@ from ..grains.refs import as_tuple, struct_ref
 from ..physics.contact_law import spring_dashpot
 from ..physics.history import history_mark_impact
 from .cells import axis_index, grid_shape, min_image, sort_points, stencil_cell
+from .path import hermite_weights
 
 __all__ = ["ClusterContacts", "make_cluster_contacts", "with_packed_bed", "contact_parameters", "substeps", "contact_phase",
            "build_contact_list",
@@ -627,15 +628,7 @@ def _poses(st, w, cc, s, dt):
 def _pose_one(st, w, cc, p, s, dt):
     x0 = w.x0[p]
     x1 = cc.x1[p]
-    s2 = s * s
-    s3 = s2 * s
-    h00 = 2.0 * s3 - 3.0 * s2 + 1.0
-    h10 = s3 - 2.0 * s2 + s
-    h01 = -2.0 * s3 + 3.0 * s2
-    h11 = s3 - s2
-    d00 = 6.0 * s2 - 6.0 * s
-    d10 = 3.0 * s2 - 4.0 * s + 1.0
-    d11 = 3.0 * s2 - 2.0 * s
+    h00, h10, h01, h11, d00, d10, d11 = hermite_weights(s)
     for i in range(3):
         cc.P[p, i] = h00 * x0[i] + h10 * dt * x0[3 + i] + h01 * x1[i] + h11 * dt * x1[3 + i] + cc.dx[p, i]
         cc.V[p, i] = (d00 * (x0[i] - x1[i])) / dt + d10 * x0[3 + i] + d11 * x1[3 + i] + cc.dv[p, i]

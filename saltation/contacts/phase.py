@@ -221,6 +221,7 @@ from .pairs import (
     push_apart,
     rebuild,
 )
+from .path import hermite_weights
 
 __all__ = ["ContactPhase", "SubstepSet", "BedContext", "make_contact_phase", "make_bed_context", "soft_contact_phase",
            "empty_substep_set",
@@ -448,15 +449,7 @@ def _grow(cs, c, r):
 @njit(cache=True, inline="always", error_model="numpy", _nrt=False)
 def _hermite(x0, x1, v0, v1, s, dt):
     """Cubic Hermite position and velocity at s ∈ [0, 1] through (x0, v0), (x1, v1)."""
-    s2 = s * s
-    s3 = s2 * s
-    h00 = 2.0 * s3 - 3.0 * s2 + 1.0
-    h10 = s3 - 2.0 * s2 + s
-    h01 = -2.0 * s3 + 3.0 * s2
-    h11 = s3 - s2
-    d00 = 6.0 * s2 - 6.0 * s
-    d10 = 3.0 * s2 - 4.0 * s + 1.0
-    d11 = 3.0 * s2 - 2.0 * s
+    h00, h10, h01, h11, d00, d10, d11 = hermite_weights(s)
     x = h00 * x0 + h01 * x1 + dt * (h10 * v0 + h11 * v1)
     v = d00 * (x0 - x1) / dt + d10 * v0 + d11 * v1
     return x, v
@@ -465,12 +458,7 @@ def _hermite(x0, x1, v0, v1, s, dt):
 @njit(cache=True, inline="always", error_model="numpy", _nrt=False)
 def _hermite_x(x0, x1, v0, v1, s, dt):
     """The position of _hermite alone (the same arithmetic)."""
-    s2 = s * s
-    s3 = s2 * s
-    h00 = 2.0 * s3 - 3.0 * s2 + 1.0
-    h10 = s3 - 2.0 * s2 + s
-    h01 = -2.0 * s3 + 3.0 * s2
-    h11 = s3 - s2
+    h00, h10, h01, h11, _, _, _ = hermite_weights(s)
     return h00 * x0 + h01 * x1 + dt * (h10 * v0 + h11 * v1)
 
 
