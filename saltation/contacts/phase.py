@@ -456,13 +456,6 @@ def _hermite(x0, x1, v0, v1, s, dt):
 
 
 @njit(cache=True, inline="always", error_model="numpy", _nrt=False)
-def _hermite_x(x0, x1, v0, v1, s, dt):
-    """The position of _hermite alone (the same arithmetic)."""
-    h00, h10, h01, h11, _, _, _ = hermite_weights(s)
-    return h00 * x0 + h01 * x1 + dt * (h10 * v0 + h11 * v1)
-
-
-@njit(cache=True, inline="always", error_model="numpy", _nrt=False)
 def _set_path(cs, a, s, dt):
     """cur (P, V, W) of member a at s: free-flight path plus its deviation."""
     path, cur, dev = cs.path, cs.cur, cs.dev
@@ -476,13 +469,14 @@ def _set_path(cs, a, s, dt):
 @njit(cache=True, inline="always", error_model="numpy", _nrt=False)
 def _position_of(cs, b, s, dt):
     """x of member b at s (that of _state_of): most pairs looked at are not in contact,
-    and their velocities and spins are not needed."""
+    and their velocities and spins are not needed (the inlined _hermite's unused
+    velocity is dropped by the compiler)."""
     if cs.active[b] != 0:
         return cs.cur[b, 0], cs.cur[b, 1], cs.cur[b, 2]
     p = cs.path
-    return (_hermite_x(p[b, 0], p[b, 9], p[b, 3], p[b, 12], s, dt),
-            _hermite_x(p[b, 1], p[b, 10], p[b, 4], p[b, 13], s, dt),
-            _hermite_x(p[b, 2], p[b, 11], p[b, 5], p[b, 14], s, dt))
+    return (_hermite(p[b, 0], p[b, 9], p[b, 3], p[b, 12], s, dt)[0],
+            _hermite(p[b, 1], p[b, 10], p[b, 4], p[b, 13], s, dt)[0],
+            _hermite(p[b, 2], p[b, 11], p[b, 5], p[b, 14], s, dt)[0])
 
 
 @njit(cache=True, inline="always", error_model="numpy", _nrt=False)
@@ -819,7 +813,7 @@ def _engage_kernel(x0w, pos, vel, dt, box, per, nbr, nbr_count, n_touch, in_bed,
     bits as joining at the coarse bound (the deviation is exactly zero until the first
     contact), and a grain that no bound lets touch anything in the step is not sub-stepped
     at all: its free flight and the hard bed are the same (its path stays above the bed
-    top). Measured at 3.94 % (benchmarks/bench_dense.py): CHANGELOG.md, issue 19."""
+    top). The cost: module docstring, "Which grains are sub-stepped"."""
     # every array an argument: Numba 0.68 dropped this loop's writes when they went to an
     # array taken from a named tuple inside the function. Grains in the list's cell order:
     # neighbouring grains' rows are then read from cache, not from all over memory.
