@@ -2,7 +2,8 @@
 soft contacts with the bed spheres (physics/contact_law) while the fluid force acts every
 step. Checked against analysis: a grain at rest in a hollow stays there in still water;
 the critical tilt of a sphere in the hollow of three touching spheres; rolling without
-slip down two rails, and sliding once the slope asks more friction than the contacts have.
+slip down two rails, and sliding once the slope asks more friction than the contacts have;
+the same for bonded-sphere grains (one sphere, and a spanwise dumbbell on four rails).
 """
 from __future__ import annotations
 
@@ -235,3 +236,74 @@ def test_critical_tilt_of_a_one_sphere_composite(monkeypatch, tmp_path, factor, 
         assert drift.min() > 0.5, drift
     else:
         assert drift.max() < 1e-2, drift
+
+
+# Rolling and sliding of bonded-sphere grains down rails, against the sphere's analysis
+# above: (a) a one-sphere grain on two rails; (b) a spanwise dumbbell, two spheres of
+# diameter Dn at z = ±SPAN about its centre, each on its own two rails. The dumbbell's
+# moment about z is that of its two spheres about their own centres, I_zz/m = 0.1 Dn², so
+# a and the rolling condition are the sphere's, but the grain's weight, normal and friction
+# forces are carried by four contacts whose lever arms (±SPAN in z) must cancel in the
+# torque; a spurious yaw or roll would show as spin_x, spin_y or a z drift.
+SPAN = 1.5
+
+
+def _composite_rails(monkeypatch, grain, rails_z, lz, spacing=0.025):
+    import saltation.engine.composites as engine
+
+    xs = np.arange(0.0, LX, spacing)
+    rails = np.concatenate([np.column_stack([xs, np.full(xs.size, BED_CENTRE_Y), np.full(xs.size, z)])
+                            for z in rails_z])
+    monkeypatch.setattr(engine, "make_packed_bed", lambda a, b, cut=1.0: bed_from_centres(rails, a, b, cut))
+    monkeypatch.setattr(engine, "draw_grains", lambda case, n: (["equant"] * n, np.ones((n, 3)), [grain] * n))
+    monkeypatch.setattr(engine, "random_quaternions", lambda n, rng: np.tile([1.0, 0.0, 0.0, 0.0], (n, 1)))
+    start = np.array([[1.0, BED_CENTRE_Y + math.sqrt(1 - W * W), lz / 2]])
+    monkeypatch.setattr(engine.ClusterSimulation, "_centres_resting", lambda self, quat: start.copy())
+
+
+def _composite_roll(monkeypatch, tmp_path, slope, dumbbell=False):
+    from saltation.grains.shapes import Composite
+
+    if dumbbell:
+        lz = 7.0
+        grain = Composite.from_spheres([[0.0, 0.0, -SPAN], [0.0, 0.0, SPAN]], [0.5, 0.5], zingg="equant",
+                                       subtype=1, axes=(1.0, 1.0, 1.0))
+        rails_z = [lz / 2 + s * SPAN + t * W for s in (-1, 1) for t in (-1, 1)]
+    else:
+        lz = 4.0
+        grain = Composite.from_spheres([[0.0, 0.0, 0.0]], [0.5], zingg="equant", subtype=1, axes=(1.0, 1.0, 1.0))
+        rails_z = [lz / 2 - W, lz / 2 + W]
+    _composite_rails(monkeypatch, grain, rails_z, lz)
+    off = {k: False for k in ("drag", "lift", "magnus", "added_mass", "fluid_acceleration", "basset", "spin")}
+    case = _composite_case(1, shape="equant", slope=slope, duration=0.1, forces=off)
+    case["run"]["domain"] = [LX * D, lz * D, 10 * D]
+    case["output"]["tracks_interval"] = 0.2 * math.sqrt(D / (9.81 * R))  # 0.2 d/u*
+    tr = saltation.run(case, out=tmp_path / f"roll{slope}{dumbbell}").tracks
+    a = 2.0 * np.polyfit(tr.t.to_numpy(), tr.x.to_numpy(), 2)[0]
+    # the grain rattles over the rails' bumps (spheres every 0.025 d): slip and stray spin
+    # taken over the run, not at one instant
+    on = tr[tr.t >= 1.0]
+    slip = float((on.u / (RHO * -on.spin_z)).mean())
+    spin = np.abs(on.spin_z).max()
+    stray = max(np.abs(on.spin_x).max() / spin, np.abs(on.spin_y).max() / spin, np.abs(tr.z - lz / 2).max())
+    return a, slip, stray, tr
+
+
+@pytest.mark.parametrize("dumbbell", [False, True], ids=["one-sphere", "dumbbell"])
+def test_composites_roll_down_rails(monkeypatch, tmp_path, dumbbell):
+    theta = math.radians(15.0)
+    a, slip, stray, tr = _composite_roll(monkeypatch, tmp_path, 15.0, dumbbell)
+    assert tr.x.iloc[-1] - tr.x.iloc[0] > 1.0  # it went somewhere: a measured, not a rest
+    expected = G_V * math.sin(theta) / (1 + 0.1 / RHO**2)
+    assert abs(a / expected - 1) < 0.05, (a, expected)
+    assert abs(slip - 1) < 0.03, slip
+    assert stray < 0.02, stray  # the sphere on the same rails: 0.015
+
+
+def test_a_composite_slides_past_the_friction_limit(monkeypatch, tmp_path):
+    theta = math.radians(25.0)
+    a, slip, stray, _ = _composite_roll(monkeypatch, tmp_path, 25.0)
+    expected = G_V * (math.sin(theta) - MU * math.cos(theta) / math.sqrt(1 - W * W))
+    assert abs(a / expected - 1) < 0.05, (a, expected)
+    assert slip > 1.3, slip
+    assert stray < 0.02, stray  # the sphere on the same rails: 0.015
