@@ -317,8 +317,9 @@ def build_neighbour_list(pos, grid, cell_of, cell_start, cell_count, order, cuto
 
     Writes up to K = nbr.shape[1] neighbours per grain into ``nbr[i]`` and the true
     number into ``nbr_count[i]``; returns the largest count (> K: rebuild with a larger
-    K, the rows are then truncated). Neighbours are listed in stencil order, then id
-    order within a cell. Needs ``build_cells`` on the same positions first.
+    K, the rows are then truncated). Each row is in id order, whatever the cells: every
+    sum over a row (the contact forces) is then the same whenever and with whatever skin
+    the list was built. Needs ``build_cells`` on the same positions first.
 
     Works cell by cell (parallel over cells; a grain belongs to one cell, so each row is
     written by one iteration) on a copy of the positions in cell order: marching through
@@ -375,11 +376,25 @@ def build_neighbour_list(pos, grid, cell_of, cell_start, cell_count, order, cuto
                         if cnt < cap:
                             nbr[i, cnt] = order[q]
                         cnt += 1
+            if cnt <= cap:
+                _sort_row(nbr[i], cnt)
             nbr_count[i] = cnt
             if cnt > most:
                 most = cnt
         largest[ci] = most
     return largest.max() if n > 0 else 0
+
+
+@njit(cache=True, inline="always")
+def _sort_row(row, m):
+    """Insertion sort of row[:m] (a few dozen ids, mostly in runs from the stencil cells)."""
+    for k in range(1, m):
+        v = row[k]
+        q = k - 1
+        while q >= 0 and row[q] > v:
+            row[q + 1] = row[q]
+            q -= 1
+        row[q + 1] = v
 
 
 @njit(cache=True)
@@ -398,7 +413,7 @@ def _pairs_from_list(nbr, nbr_count, total):
 
 def neighbour_pairs(pos, grid: CellGrid, cutoff: float) -> np.ndarray:
     """All pairs (i < j) closer than ``cutoff`` (minimum image), as an (M, 2) int64 array
-    sorted by i then stencil order: the cell search, for tests and diagnostics."""
+    sorted by i then j: the cell search, for tests and diagnostics."""
     pos = np.ascontiguousarray(pos, dtype=np.float64)
     if np.any(grid.size < cutoff * (1.0 - 1e-12)):
         raise ValueError(f"cells {grid.size.tolist()} are narrower than the cutoff {cutoff!r}")
