@@ -113,25 +113,35 @@ RHO = math.sqrt(1 - W * W) / 2
 MU = 0.10  # the bed friction of the default coefficients (Schmeeckle et al. 2001)
 
 
-def _rails(monkeypatch, spacing):
-    lz = 4.0
-    xs = np.arange(0.0, LX, spacing)
-    rails = np.concatenate([np.column_stack([xs, np.full(xs.size, BED_CENTRE_Y), np.full(xs.size, lz / 2 + s * W)])
-                            for s in (-1, 1)])
-    monkeypatch.setattr(stepping, "make_packed_bed", lambda a, b, cut=1.0: bed_from_centres(rails, a, b, cut))
-    monkeypatch.setattr(simulation, "resting_pockets",
-                        lambda a, b: np.array([[1.0, BED_CENTRE_Y + math.sqrt(1 - W * W), lz / 2]]))
-    return lz
+RAIL_SPACING = 0.025  # d between the bed spheres of a rail
 
 
-def _roll(monkeypatch, tmp_path, slope, spacing=0.025):
-    lz = _rails(monkeypatch, spacing)
-    off = {k: False for k in ("drag", "lift", "magnus", "added_mass", "fluid_acceleration", "basset", "spin")}
-    case = _case(1, slope=slope, duration=0.1, forces=off)
+def _rail_bed(monkeypatch, module, rails_z):
+    """Replace ``module``'s packed bed by rails of bed spheres along x at heights z ∈ rails_z;
+    returns the grain's resting centre height over them."""
+    xs = np.arange(0.0, LX, RAIL_SPACING)
+    rails = np.concatenate([np.column_stack([xs, np.full(xs.size, BED_CENTRE_Y), np.full(xs.size, z)])
+                            for z in rails_z])
+    monkeypatch.setattr(module, "make_packed_bed", lambda a, b, cut=1.0: bed_from_centres(rails, a, b, cut))
+    return BED_CENTRE_Y + math.sqrt(1 - W * W)
+
+
+def _roll_run(tmp_path, case, lz, name):
+    """One grain released at rest on the rails without fluid forces; its acceleration along
+    x (a parabola fitted to x(t)) and its tracks."""
+    case["forces"] = {k: False for k in ("drag", "lift", "magnus", "added_mass", "fluid_acceleration", "basset",
+                                         "spin")}
     case["run"]["domain"] = [LX * D, lz * D, 10 * D]
     case["output"]["tracks_interval"] = 0.2 * math.sqrt(D / (9.81 * R))  # 0.2 d/u*
-    tr = saltation.run(case, out=tmp_path / f"roll{slope}").tracks
-    a = 2.0 * np.polyfit(tr.t.to_numpy(), tr.x.to_numpy(), 2)[0]
+    tr = saltation.run(case, out=tmp_path / name).tracks
+    return 2.0 * np.polyfit(tr.t.to_numpy(), tr.x.to_numpy(), 2)[0], tr
+
+
+def _roll(monkeypatch, tmp_path, slope):
+    lz = 4.0
+    y = _rail_bed(monkeypatch, stepping, [lz / 2 - W, lz / 2 + W])
+    monkeypatch.setattr(simulation, "resting_pockets", lambda a, b: np.array([[1.0, y, lz / 2]]))
+    a, tr = _roll_run(tmp_path, _case(1, slope=slope, duration=0.1), lz, f"roll{slope}")
     slip = tr.u.to_numpy()[-1] / (RHO * -tr.spin_z.to_numpy()[-1])  # 1: rolling without slip
     return a, slip
 
@@ -216,14 +226,19 @@ def test_composites_settle_and_stay_at_rest_in_still_water(tmp_path):
     assert tr[tr.t == ts[-1]].y.min() > 0.0
 
 
-def _one_sphere_grains(monkeypatch):
-    """Bonded-sphere grains of one sphere of diameter Dn: the sphere contact exactly
-    (contacts/composites.py), so the sphere's analytic results apply."""
+def _grains_of(monkeypatch, centres, radii):
+    """Every bonded-sphere grain of the run made of these spheres (body frame, Dn)."""
     import saltation.engine.composites as engine
     from saltation.grains.shapes import Composite
 
-    one = Composite.from_spheres([[0.0, 0.0, 0.0]], [0.5], zingg="equant", subtype=1, axes=(1.0, 1.0, 1.0))
-    monkeypatch.setattr(engine, "draw_grains", lambda case, n: (["equant"] * n, np.ones((n, 3)), [one] * n))
+    grain = Composite.from_spheres(centres, radii, zingg="equant", subtype=1, axes=(1.0, 1.0, 1.0))
+    monkeypatch.setattr(engine, "draw_grains", lambda case, n: (["equant"] * n, np.ones((n, 3)), [grain] * n))
+
+
+def _one_sphere_grains(monkeypatch):
+    """Bonded-sphere grains of one sphere of diameter Dn: the sphere contact exactly
+    (contacts/composites.py), so the sphere's analytic results apply."""
+    _grains_of(monkeypatch, [[0.0, 0.0, 0.0]], [0.5])
 
 
 @pytest.mark.parametrize("factor, moves", [(0.95, False), (1.05, True)])
@@ -248,38 +263,22 @@ def test_critical_tilt_of_a_one_sphere_composite(monkeypatch, tmp_path, factor, 
 SPAN = 1.5
 
 
-def _composite_rails(monkeypatch, grain, rails_z, lz, spacing=0.025):
-    import saltation.engine.composites as engine
-
-    xs = np.arange(0.0, LX, spacing)
-    rails = np.concatenate([np.column_stack([xs, np.full(xs.size, BED_CENTRE_Y), np.full(xs.size, z)])
-                            for z in rails_z])
-    monkeypatch.setattr(engine, "make_packed_bed", lambda a, b, cut=1.0: bed_from_centres(rails, a, b, cut))
-    monkeypatch.setattr(engine, "draw_grains", lambda case, n: (["equant"] * n, np.ones((n, 3)), [grain] * n))
-    monkeypatch.setattr(engine, "random_quaternions", lambda n, rng: np.tile([1.0, 0.0, 0.0, 0.0], (n, 1)))
-    start = np.array([[1.0, BED_CENTRE_Y + math.sqrt(1 - W * W), lz / 2]])
-    monkeypatch.setattr(engine.ClusterSimulation, "_centres_resting", lambda self, quat: start.copy())
-
-
 def _composite_roll(monkeypatch, tmp_path, slope, dumbbell=False):
-    from saltation.grains.shapes import Composite
+    import saltation.engine.composites as engine
 
     if dumbbell:
         lz = 7.0
-        grain = Composite.from_spheres([[0.0, 0.0, -SPAN], [0.0, 0.0, SPAN]], [0.5, 0.5], zingg="equant",
-                                       subtype=1, axes=(1.0, 1.0, 1.0))
+        _grains_of(monkeypatch, [[0.0, 0.0, -SPAN], [0.0, 0.0, SPAN]], [0.5, 0.5])
         rails_z = [lz / 2 + s * SPAN + t * W for s in (-1, 1) for t in (-1, 1)]
     else:
         lz = 4.0
-        grain = Composite.from_spheres([[0.0, 0.0, 0.0]], [0.5], zingg="equant", subtype=1, axes=(1.0, 1.0, 1.0))
+        _one_sphere_grains(monkeypatch)
         rails_z = [lz / 2 - W, lz / 2 + W]
-    _composite_rails(monkeypatch, grain, rails_z, lz)
-    off = {k: False for k in ("drag", "lift", "magnus", "added_mass", "fluid_acceleration", "basset", "spin")}
-    case = _composite_case(1, shape="equant", slope=slope, duration=0.1, forces=off)
-    case["run"]["domain"] = [LX * D, lz * D, 10 * D]
-    case["output"]["tracks_interval"] = 0.2 * math.sqrt(D / (9.81 * R))  # 0.2 d/u*
-    tr = saltation.run(case, out=tmp_path / f"roll{slope}{dumbbell}").tracks
-    a = 2.0 * np.polyfit(tr.t.to_numpy(), tr.x.to_numpy(), 2)[0]
+    y = _rail_bed(monkeypatch, engine, rails_z)
+    monkeypatch.setattr(engine, "random_quaternions", lambda n, rng: np.tile([1.0, 0.0, 0.0, 0.0], (n, 1)))
+    monkeypatch.setattr(engine.ClusterSimulation, "_centres_resting", lambda self, quat: np.array([[1.0, y, lz / 2]]))
+    a, tr = _roll_run(tmp_path, _composite_case(1, shape="equant", slope=slope, duration=0.1), lz,
+                      f"roll{slope}{dumbbell}")
     # the grain rattles over the rails' bumps (spheres every 0.025 d): slip and stray spin
     # taken over the run, not at one instant
     on = tr[tr.t >= 1.0]
@@ -293,7 +292,7 @@ def _composite_roll(monkeypatch, tmp_path, slope, dumbbell=False):
 def test_composites_roll_down_rails(monkeypatch, tmp_path, dumbbell):
     theta = math.radians(15.0)
     a, slip, stray, tr = _composite_roll(monkeypatch, tmp_path, 15.0, dumbbell)
-    assert tr.x.iloc[-1] - tr.x.iloc[0] > 1.0  # it went somewhere: a measured, not a rest
+    assert tr.x.iloc[-1] - tr.x.iloc[0] > 1.0  # it rolled: a measured on the move, not at rest
     expected = G_V * math.sin(theta) / (1 + 0.1 / RHO**2)
     assert abs(a / expected - 1) < 0.05, (a, expected)
     assert abs(slip - 1) < 0.03, slip
