@@ -148,3 +148,15 @@ def test_capped_grid_with_one_periodic_layer_still_finds_every_pair():
     assert np.prod(grid.n) <= 4
     found = set(map(tuple, neighbour_pairs(pos, grid, 1.0).tolist()))
     assert found == brute_force_pairs(pos, box, (1, 0, 1), 1.0)
+
+
+def test_stable_argsort_is_numpys_stable_argsort():
+    """The contact phase orders its candidates with it (contacts/phase._gather): it must be
+    np.argsort(kind="mergesort") exactly, ties (−0.0 = 0.0 included) kept in their order."""
+    from saltation.contacts.cells import stable_argsort
+
+    rng = np.random.default_rng(3)
+    cases = [np.zeros(0), np.array([0.5]), np.array([0.0, -0.0, 0.0, -np.inf, np.inf, -0.0]),
+             rng.integers(0, 5, 257).astype(float), rng.random(1000), np.round(rng.normal(size=333), 1)]
+    for key in cases:
+        assert np.array_equal(stable_argsort(key), np.argsort(key, kind="mergesort")), key[:8]

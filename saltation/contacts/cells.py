@@ -52,6 +52,7 @@ from numba import njit, prange
 
 __all__ = [
     "CellGrid",
+    "stable_argsort",
     "make_grid",
     "cell_index",
     "build_cells",
@@ -159,6 +160,43 @@ def _cell_ids(pos, grid, cell_of):
         iy = axis_index(pos[i, 1], ny, hy, ly, py)
         iz = axis_index(pos[i, 2], nz, hz, lz, pz)
         cell_of[i] = (ix * ny + iy) * nz + iz
+
+
+@njit(cache=True)
+def stable_argsort(key):
+    """np.argsort(key, kind="mergesort") for keys that are not NaN: the indices that sort
+    ``key``, equal keys in their original order (a bottom-up merge sort; Numba's own
+    mergesort costs ~3 s of compile)."""
+    n = key.shape[0]
+    a = np.empty(n, np.int64)
+    b = np.empty(n, np.int64)
+    for i in range(n):
+        a[i] = i
+    width = 1
+    while width < n:
+        for lo in range(0, n, 2 * width):
+            mid = min(lo + width, n)
+            hi = min(lo + 2 * width, n)
+            i, j, k = lo, mid, lo
+            while i < mid and j < hi:
+                if key[a[j]] < key[a[i]]:  # the right run's key only when strictly smaller: stable
+                    b[k] = a[j]
+                    j += 1
+                else:
+                    b[k] = a[i]
+                    i += 1
+                k += 1
+            while i < mid:
+                b[k] = a[i]
+                i += 1
+                k += 1
+            while j < hi:
+                b[k] = a[j]
+                j += 1
+                k += 1
+        a, b = b, a
+        width *= 2
+    return a
 
 
 @njit(cache=True)

@@ -211,7 +211,7 @@ from ..grains.refs import as_tuple, struct_ref
 from ..physics.contact_law import lever_torque, sphere_contact_velocity, spring_dashpot
 from ..physics.history import history_mark_impact
 from ..physics.rng import uniform2
-from .cells import build_cells, min_image, stencil_cells
+from .cells import build_cells, min_image, stable_argsort, stencil_cells
 from .pairs import (
     LEVER_RADIUS,
     ContactList,
@@ -1288,7 +1288,7 @@ def _gather(x0w, st, cl, bc, ph, dt, d, blocked, forced, cs, filtered):
             m += 1
     if filtered:
         _near_pairs(cs, cand, cl.grid.box, cl.grid.periodic, dt, d + 2.0 * ph.near_slack[0])
-    by_start = cand[np.argsort(key, kind="mergesort")]
+    by_start = cand[stable_argsort(key)]
     # stable counting sort by block: each block's candidates by start
     cstart = np.zeros(n_blocks + 1, np.int64)
     for t in range(n_cand):

@@ -76,6 +76,7 @@ from ..grains import shapes
 from ..grains.initial import Y_RANGE, composites_resting, initial_conditions
 from ..io.writers import ClusterTrackWriter, run_metadata, write_table
 from ..physics.forces import CM
+from . import cold_start
 from .simulation import Simulation, SimulationError
 from .statistics import DISCARDED_JUMPS, empty_rows, jump_statistics
 from .stepping import LIST_HEIGHT, default_skin  # the contact skin and cell height of sphere runs
@@ -291,6 +292,21 @@ class ClusterSimulation(Simulation):
 
     def _advance(self, f, st, ws, t0, n, step0) -> int:
         return self._advance_composites(f, st, ws, int(self.case.run.seed), t0, n)
+
+    def _precompile(self, f, st, ws) -> None:
+        """A first run on two cores (engine/cold_start.py): with contacts, the contact phase
+        is compiled in a helper process while this one compiles the free flight."""
+        if self.cc is None:
+            return
+        seed, t0 = int(self.case.run.seed), 0.0
+        typed = cold_start.typed
+        cold_start.compile_split(
+            cluster_contacts.advance_clusters_contacts,
+            (f, self.coef, self.bed, seed, st, ws, self.hist_coef, t0, self.dt, 0, self.top_d, self.cc, self.n_sub,
+             self.timers, self.pb),
+            elsewhere=(cluster_contacts.contact_phase, typed(st, ws, self.cc, self.dt, self.n_sub, self.pb)),
+            here=[(clusters.free_flight_pass, typed(f, self.coef, self.bed, seed, st, ws, self.hist_coef, t0, self.dt,
+                                                    self.top_d))])
 
     def _write_tracks(self, tw, t, idx, st):
         tw.write(t, idx, st.pos, st.vel, st.omega, st.quat, self.class_id)

@@ -50,6 +50,7 @@ from ..flight.spheres import (  # the inline bed body
     free_flight_particles,
 )
 from ..grains.refs import as_tuple
+from . import cold_start
 
 CONTACTS_OFF, CONTACTS_SOFT, CONTACTS_HARD = 0, 1, 2
 BED_VIRTUAL, BED_PACKED = 0, 1
@@ -245,16 +246,37 @@ class Stepper:
             self.cl = rebuild(np.ascontiguousarray(pos, dtype=np.float64),
                               cl._replace(cutoff=1.0 + self.skin, skin=self.skin))
 
-    def advance(self, f, st, ws, t0: float, n_steps: int, step0: int) -> int:
-        """n_steps steps from t0 (global step index step0); returns the steps done."""
+    def _step_args(self, f, st, ws, t0: float, n_steps: int, step0: int) -> tuple:
+        """advance_split's arguments."""
         soft = self.soft
         if soft is not None:
             soft = soft._replace(threads=int(numba.get_num_threads()))
-        done, self.cl = advance_split(
-            f, self.coef, self.bed, self.virtual, self.packed, st, ws, self.hist_coef, float(t0), self.dt,
-            int(n_steps), self.top_d, int(step0), soft, self.hard, self.model, self.cl, self.ph, self.bc,
-            self.scratch, self.pb, self.last_contact, self.timers)
+        return (f, self.coef, self.bed, self.virtual, self.packed, st, ws, self.hist_coef, float(t0), self.dt,
+                int(n_steps), self.top_d, int(step0), soft, self.hard, self.model, self.cl, self.ph, self.bc,
+                self.scratch, self.pb, self.last_contact, self.timers)
+
+    def advance(self, f, st, ws, t0: float, n_steps: int, step0: int) -> int:
+        """n_steps steps from t0 (global step index step0); returns the steps done."""
+        done, self.cl = advance_split(*self._step_args(f, st, ws, t0, n_steps, step0))
         return int(done)
+
+    def precompile(self, f, st, ws) -> None:
+        """A first run on two cores (engine/cold_start.py): with soft contacts, the contact
+        phase is compiled in a helper process while this one compiles the free flight and
+        the bed, each for the types advance_split calls it with; the first ``advance`` then
+        compiles the step's own body and loads the rest. Nothing when the step is cached."""
+        if self.soft is None:
+            return
+        args = self._step_args(f, st, ws, 0.0, 0, 0)
+        soft = args[13]
+        typed = cold_start.typed
+        cold_start.compile_split(
+            advance_split, args,
+            elsewhere=(soft_contact_phase, typed(st, ws.x0, self.model, self.cl, self.ph, self.bc, 0.0, 0, self.dt,
+                                                 soft.n_sub, empty_substep_set(), soft.threads)),
+            here=[(_free_flight, typed(f, self.coef, st, ws, self.hist_coef, 0.0, self.dt)),
+                  (_bed_pass, typed(st, ws, 0.0, self.dt, 0, self.bed, self.virtual, self.packed, self.pb,
+                                    self.last_contact, self.top_d, self.ph.active))])
 
     # ---------------------------------------------------------------- statistics
     def per_particle_collisions(self) -> np.ndarray:

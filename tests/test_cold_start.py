@@ -1,0 +1,76 @@
+"""A first run's compile on two cores (saltation/engine/cold_start.py): the contact phase
+that a helper process compiles is the one the step loads, nothing is compiled twice, and
+the run is the run a serial compile gives."""
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent / "regression"))
+from cases import fingerprint  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+
+RUN = textwrap.dedent("""
+    import json, sys
+    import saltation
+    from saltation.contacts import phase
+    from saltation.contacts.cells import stable_argsort
+    from saltation.engine import cold_start, stepping
+    before = cold_start.is_cached(stable_argsort, cold_start.typed(__import__("numpy").zeros(3)))
+    started = []
+    start = cold_start.compile_elsewhere
+    cold_start.compile_elsewhere = lambda *a: (started.append(a[0].py_func.__name__), start(*a))[1]
+    res = saltation.run("cases/default.toml", out=sys.argv[1], progress=False, overwrite=True,
+                        **{"run.n_particles": 40, "run.duration": 0.05, "output.vtk": False})
+    # (loaded from the cache, compiled here, compiled signatures) of each kernel in this process
+    count = lambda k: [sum(k._cache_hits.values()), sum(k._cache_misses.values()), len(k.overloads)]
+    print(json.dumps({"contact": count(phase.soft_contact_phase), "flight": count(stepping._free_flight),
+                      "bed": count(stepping._bed_pass), "helpers": started, "argsort_cached_before": before,
+                      "argsort_cached_after": cold_start.is_cached(stable_argsort,
+                                                                   cold_start.typed(__import__("numpy").zeros(3)))}))
+""")
+
+
+def _run(tmp_path, name, cache, serial):
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(cache), PYTHONPATH=str(ROOT))
+    env.pop("SALTATION_SERIAL_COMPILE", None)
+    if serial:
+        env["SALTATION_SERIAL_COMPILE"] = "1"
+    out = tmp_path / name
+    proc = subprocess.run([sys.executable, "-c", RUN, str(out)], cwd=ROOT, env=env, capture_output=True, text=True,
+                          timeout=1200)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    return json.loads(proc.stdout.strip().splitlines()[-1]), out
+
+
+def test_the_helpers_contact_phase_is_used_and_the_run_is_the_same(tmp_path):
+    cache = tmp_path / "cache"  # empty: a first run
+    cold, out_cold = _run(tmp_path, "cold", cache, serial=False)
+    # the contact phase came from the helper through the cache; the free flight and the bed
+    # were compiled here once, for the types the step calls them with (no second signature)
+    assert cold["helpers"] == ["soft_contact_phase"] and cold["contact"] == [1, 0, 1], cold
+    assert cold["flight"] == [0, 1, 1] and cold["bed"] == [0, 1, 1], cold
+    assert cold["argsort_cached_before"] is False and cold["argsort_cached_after"] is True, cold
+    # a second run starts no helper (the step is cached), compiles nothing, gives the same run
+    warm, out_warm = _run(tmp_path, "warm", cache, serial=False)
+    assert warm["helpers"] == [], warm
+    assert warm["contact"][1] == 0 and warm["flight"][1] == 0 and warm["bed"][1] == 0, warm
+    a, b = fingerprint(out_cold), fingerprint(out_warm)  # tables and summary, without wall-clock times
+    assert len(a["jumps/particle"]) > 0 and a.keys() == b.keys()
+    for key in a:
+        assert np.array_equal(a[key], b[key]), key
+
+def test_no_helper_on_request(monkeypatch):
+    from saltation.engine import cold_start
+
+    monkeypatch.setenv("SALTATION_SERIAL_COMPILE", "1")
+    assert not cold_start.helper_wanted()
+    monkeypatch.setenv("SALTATION_SERIAL_COMPILE", "0")
+    assert cold_start.helper_wanted() == ((os.cpu_count() or 1) >= 2)
