@@ -8,7 +8,8 @@ and records every Numba compilation with a compile-event listener (``numba.core.
 for each kernel its signatures and its *exclusive* seconds (its own compile, without the
 kernels it compiled on the way; that includes re-optimising and emitting the callees
 Numba links into it). Beside it, the time in Numba's compiler passes and in LLVM's
-stages. Run it with an empty cache: a warm cache compiles nothing. A kernel listed with
+stages. Run it with an empty cache: a warm cache compiles nothing. Everything compiles in this
+process (SALTATION_SERIAL_COMPILE=1: no helper for the contact phase). A kernel listed with
 more than one signature was compiled more than once (see ARCHITECTURE.md, "What a kernel
 compiles, and how often").
 """
@@ -18,6 +19,7 @@ import argparse
 import collections
 import functools
 import json
+import os
 import tempfile
 import time
 from pathlib import Path
@@ -78,6 +80,9 @@ def main():
     ap.add_argument("--top", type=int, default=30)
     ap.add_argument("--json", default=None, help="write every record here")
     args = ap.parse_args()
+    # every kernel in this process, where the listener sees it (no helper process for the
+    # contact phase: saltation/engine/cold_start.py)
+    os.environ["SALTATION_SERIAL_COMPILE"] = "1"
 
     stages = _Exclusive()
     codegen.CPUCodeLibrary._optimize_functions = stages.timed(

@@ -295,7 +295,9 @@ class ClusterSimulation(Simulation):
 
     def _precompile(self, f, st, ws) -> None:
         """A first run on two cores (engine/cold_start.py): with contacts, the contact phase
-        is compiled in a helper process while this one compiles the free flight."""
+        is compiled in a helper process while this one compiles the free flight and then the
+        contact phase's last kernel (``_finish``), which the helper reaches last and then
+        loads from the cache (the helper's tree is the larger one)."""
         if self.cc is None:
             return
         seed, t0 = int(self.case.run.seed), 0.0
@@ -306,7 +308,8 @@ class ClusterSimulation(Simulation):
              self.timers, self.pb),
             elsewhere=(cluster_contacts.contact_phase, typed(st, ws, self.cc, self.dt, self.n_sub, self.pb)),
             here=[(clusters.free_flight_pass, typed(f, self.coef, self.bed, seed, st, ws, self.hist_coef, t0, self.dt,
-                                                    self.top_d))])
+                                                    self.top_d)),
+                  (cluster_contacts._finish, typed(*cluster_contacts._refs(st, ws, self.cc)))])
 
     def _write_tracks(self, tw, t, idx, st):
         tw.write(t, idx, st.pos, st.vel, st.omega, st.quat, self.class_id)
