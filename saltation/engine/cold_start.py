@@ -92,13 +92,16 @@ def typed(*values) -> tuple:
     return tuple(numba.typeof(v) for v in values)
 
 
-def compile_split(step, step_args: tuple, elsewhere, here) -> None:
+def compile_split(step, step_args: tuple, jobs) -> None:
     """Unless ``step`` (a kernel) is cached for ``step_args``, or the helper is not wanted:
-    compile ``elsewhere`` = (kernel, argument types) in a helper process and each (kernel,
-    argument types) of ``here`` in this one, then wait for the helper. Those must be the
-    types the step calls them with, or the step compiles them again (slower, not wrong)."""
+    ``jobs()`` gives (elsewhere, here); compile ``elsewhere`` = (kernel, argument types) in a
+    helper process and each (kernel, argument types) of ``here`` in this one, then wait for
+    the helper. Those must be the types the step calls them with, or the step compiles them
+    again (slower, not wrong). ``jobs`` is called only then (making the types may call a
+    small kernel)."""
     if not helper_wanted() or is_cached(step, typed(*step_args)):
         return
+    elsewhere, here = jobs()
     helper = compile_elsewhere(*elsewhere)
     compiled = False
     try:

@@ -300,16 +300,19 @@ class ClusterSimulation(Simulation):
         loads from the cache (the helper's tree is the larger one)."""
         if self.cc is None:
             return
-        seed, t0 = int(self.case.run.seed), 0.0
-        typed = cold_start.typed
+        seed, t0, typed = int(self.case.run.seed), 0.0, cold_start.typed
+
+        def jobs():
+            elsewhere = (cluster_contacts.contact_phase, typed(st, ws, self.cc, self.dt, self.n_sub, self.pb))
+            here = [(clusters.free_flight_pass, typed(f, self.coef, self.bed, seed, st, ws, self.hist_coef, t0,
+                                                      self.dt, self.top_d)),
+                    (cluster_contacts._finish, typed(*cluster_contacts._refs(st, ws, self.cc)))]
+            return elsewhere, here
+
         cold_start.compile_split(
             cluster_contacts.advance_clusters_contacts,
             (f, self.coef, self.bed, seed, st, ws, self.hist_coef, t0, self.dt, 0, self.top_d, self.cc, self.n_sub,
-             self.timers, self.pb),
-            elsewhere=(cluster_contacts.contact_phase, typed(st, ws, self.cc, self.dt, self.n_sub, self.pb)),
-            here=[(clusters.free_flight_pass, typed(f, self.coef, self.bed, seed, st, ws, self.hist_coef, t0, self.dt,
-                                                    self.top_d)),
-                  (cluster_contacts._finish, typed(*cluster_contacts._refs(st, ws, self.cc)))])
+             self.timers, self.pb), jobs)
 
     def _write_tracks(self, tw, t, idx, st):
         tw.write(t, idx, st.pos, st.vel, st.omega, st.quat, self.class_id)

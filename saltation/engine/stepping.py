@@ -268,15 +268,17 @@ class Stepper:
         if self.soft is None:
             return
         args = self._step_args(f, st, ws, 0.0, 0, 0)
-        soft = args[13]
-        typed = cold_start.typed
-        cold_start.compile_split(
-            advance_split, args,
-            elsewhere=(soft_contact_phase, typed(st, ws.x0, self.model, self.cl, self.ph, self.bc, 0.0, 0, self.dt,
-                                                 soft.n_sub, empty_substep_set(), soft.threads)),
-            here=[(_free_flight, typed(f, self.coef, st, ws, self.hist_coef, 0.0, self.dt)),
-                  (_bed_pass, typed(st, ws, 0.0, self.dt, 0, self.bed, self.virtual, self.packed, self.pb,
-                                    self.last_contact, self.top_d, self.ph.active))])
+        soft, typed = args[13], cold_start.typed
+
+        def jobs():
+            elsewhere = (soft_contact_phase, typed(st, ws.x0, self.model, self.cl, self.ph, self.bc, 0.0, 0, self.dt,
+                                                   soft.n_sub, empty_substep_set(), soft.threads))
+            here = [(_free_flight, typed(f, self.coef, st, ws, self.hist_coef, 0.0, self.dt)),
+                    (_bed_pass, typed(st, ws, 0.0, self.dt, 0, self.bed, self.virtual, self.packed, self.pb,
+                                      self.last_contact, self.top_d, self.ph.active))]
+            return elsewhere, here
+
+        cold_start.compile_split(advance_split, args, jobs)
 
     # ---------------------------------------------------------------- statistics
     def per_particle_collisions(self) -> np.ndarray:
