@@ -1,6 +1,8 @@
 """A first run's compile on two cores (saltation/engine/cold_start.py): the contact phase
-that a helper process compiles is the one the step loads, nothing is compiled twice, and
-the run is the run a serial compile gives."""
+that a helper process compiles is the one the step loads, nothing is compiled twice, a
+warm run starts no helper, and the cold run is the warm run bit for bit. (That the
+helper-compiled code gives the recorded results is tests/test_regression_bits.py's check
+whenever the suite starts with an empty cache.)"""
 from __future__ import annotations
 
 import json
@@ -38,11 +40,9 @@ RUN = textwrap.dedent("""
 """)
 
 
-def _run(tmp_path, name, cache, serial):
+def _run(tmp_path, name, cache):
     env = dict(os.environ, NUMBA_CACHE_DIR=str(cache), PYTHONPATH=str(ROOT))
     env.pop("SALTATION_SERIAL_COMPILE", None)
-    if serial:
-        env["SALTATION_SERIAL_COMPILE"] = "1"
     out = tmp_path / name
     proc = subprocess.run([sys.executable, "-c", RUN, str(out)], cwd=ROOT, env=env, capture_output=True, text=True,
                           timeout=1200)
@@ -52,20 +52,21 @@ def _run(tmp_path, name, cache, serial):
 
 def test_the_helpers_contact_phase_is_used_and_the_run_is_the_same(tmp_path):
     cache = tmp_path / "cache"  # empty: a first run
-    cold, out_cold = _run(tmp_path, "cold", cache, serial=False)
+    cold, out_cold = _run(tmp_path, "cold", cache)
     # the contact phase came from the helper through the cache; the free flight and the bed
     # were compiled here once, for the types the step calls them with (no second signature)
     assert cold["helpers"] == ["soft_contact_phase"] and cold["contact"] == [1, 0, 1], cold
     assert cold["flight"] == [0, 1, 1] and cold["bed"] == [0, 1, 1], cold
     assert cold["argsort_cached_before"] is False and cold["argsort_cached_after"] is True, cold
     # a second run starts no helper (the step is cached), compiles nothing, gives the same run
-    warm, out_warm = _run(tmp_path, "warm", cache, serial=False)
+    warm, out_warm = _run(tmp_path, "warm", cache)
     assert warm["helpers"] == [], warm
     assert warm["contact"][1] == 0 and warm["flight"][1] == 0 and warm["bed"][1] == 0, warm
     a, b = fingerprint(out_cold), fingerprint(out_warm)  # tables and summary, without wall-clock times
     assert len(a["jumps/particle"]) > 0 and a.keys() == b.keys()
     for key in a:
         assert np.array_equal(a[key], b[key]), key
+
 
 def test_no_helper_on_request(monkeypatch):
     from saltation.engine import cold_start

@@ -54,6 +54,7 @@ def compile_elsewhere(dispatcher, sig) -> subprocess.Popen | None:
     root = str(Path(__file__).resolve().parents[2])  # the folder holding the saltation package
     env = dict(os.environ)  # NUMBA_CACHE_DIR too: the helper's cache is this process's (flowfields/_numba_cache)
     env["PYTHONPATH"] = os.pathsep.join([root] + ([env["PYTHONPATH"]] if env.get("PYTHONPATH") else []))
+    path = None
     try:
         fd, path = tempfile.mkstemp(prefix="saltation-sig-", suffix=".pkl")
         with os.fdopen(fd, "wb") as f:
@@ -61,7 +62,16 @@ def compile_elsewhere(dispatcher, sig) -> subprocess.Popen | None:
         return subprocess.Popen([sys.executable, "-m", __name__, fn.__module__, fn.__name__, path], env=env,
                                 stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     except Exception:  # noqa: BLE001  (no helper: this process compiles it)
+        if path is not None:
+            _remove(path)
         return None
+
+
+def _remove(path: str) -> None:
+    try:
+        os.unlink(path)
+    except OSError:
+        pass
 
 
 def finish(helper: subprocess.Popen | None, wait: bool = True) -> None:
@@ -78,11 +88,7 @@ def finish(helper: subprocess.Popen | None, wait: bool = True) -> None:
         if helper.poll() is None:
             helper.kill()
             helper.wait()
-        path = helper.args[-1]
-        try:
-            os.unlink(path)
-        except OSError:
-            pass
+        _remove(helper.args[-1])  # the signature file
 
 
 def typed(*values) -> tuple:

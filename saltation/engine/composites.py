@@ -216,10 +216,13 @@ class ClusterSimulation(Simulation):
         if self.cc is None:
             return int(clusters.advance_clusters(f, self.coef, self.bed, seed, st, w, self.hist_coef, t0, self.dt,
                                                  n, self.top_d))
-        done, self.cc = cluster_contacts.advance_clusters_contacts(
-            f, self.coef, self.bed, seed, st, w, self.hist_coef, t0, self.dt, n, self.top_d, self.cc, self.n_sub,
-            self.timers, self.pb)
+        done, self.cc = cluster_contacts.advance_clusters_contacts(*self._contact_step_args(f, st, w, seed, t0, n))
         return int(done)
+
+    def _contact_step_args(self, f, st, w, seed, t0, n):
+        """contacts.composites.advance_clusters_contacts's arguments."""
+        return (f, self.coef, self.bed, seed, st, w, self.hist_coef, t0, self.dt, n, self.top_d, self.cc, self.n_sub,
+                self.timers, self.pb)
 
     def _centres_resting(self, quat):
         """Start positions for run.start = "rest": each grain, turned by its orientation,
@@ -309,10 +312,8 @@ class ClusterSimulation(Simulation):
                     (cluster_contacts._finish, typed(*cluster_contacts._refs(st, ws, self.cc)))]
             return elsewhere, here
 
-        cold_start.compile_split(
-            cluster_contacts.advance_clusters_contacts,
-            (f, self.coef, self.bed, seed, st, ws, self.hist_coef, t0, self.dt, 0, self.top_d, self.cc, self.n_sub,
-             self.timers, self.pb), jobs)
+        cold_start.compile_split(cluster_contacts.advance_clusters_contacts,
+                                 self._contact_step_args(f, st, ws, seed, t0, 0), jobs)
 
     def _write_tracks(self, tw, t, idx, st):
         tw.write(t, idx, st.pos, st.vel, st.omega, st.quat, self.class_id)
