@@ -87,7 +87,7 @@ class FlowArrays(NamedTuple):
     sublayer_slope: float  # below y[0]: 1 the viscous sublayer u⁺ = y⁺, 0 linear to zero (inside a rough bed)
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, no_cfunc_wrapper=True, inline="always", error_model="numpy")
 def _locate_periodic(s, s0, ds, n):
     """Index of the lower neighbour and the weight of the upper one on a periodic axis.
     Any input (even a non-finite one) gives indices inside [0, n)."""
@@ -106,7 +106,7 @@ def _locate_periodic(s, s0, ds, n):
     return i, i1, w
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, no_cfunc_wrapper=True, inline="always")
 def _locate_y(y, yp):
     """The largest j <= len(y) - 2 with y[j] <= yp, for yp in [y[0], y[-1]]: the cell
     y[j] <= yp < y[j+1] (j = len(y) - 2 at the top). Binary search whose trip count
@@ -121,7 +121,7 @@ def _locate_y(y, yp):
     return lo
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, no_cfunc_wrapper=True, inline="always", error_model="numpy")
 def wall_normal(f, yp):
     """Where the height yp falls on the stretched y axis:
     (status, j0, j1, wy, dyc, sublayer) with dyc = y[j1] - y[j0] (0 for a single plane).
@@ -145,7 +145,7 @@ def wall_normal(f, yp):
     return status, j0, j0 + 1, (ys - f.y[j0]) / dyc, dyc, sublayer
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, no_cfunc_wrapper=True, inline="always")
 def _node3(d, n0, n1, wt, i, j, k):
     """The three stored components at node (i, j, k), linear in time (weight wt on n1),
     and their changes from n0 to n1: one row of 3 values per snapshot (contiguous)."""
@@ -158,7 +158,7 @@ def _node3(d, n0, n1, wt, i, j, k):
     return a0 + wt * e0, a1 + wt * e1, a2 + wt * e2, e0, e1, e2
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, no_cfunc_wrapper=True, inline="always")
 def _trilinear(v000, v100, v010, v110, v001, v101, v011, v111, wx, wy, wz):
     """Trilinear value of one component from its 8 node values."""
     a00 = v000 + wx * (v100 - v000)
@@ -170,7 +170,7 @@ def _trilinear(v000, v100, v010, v110, v001, v101, v011, v111, wx, wy, wz):
     return b0 + wz * (b1 - b0)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, no_cfunc_wrapper=True, inline="always")
 def _trilinear_with_gradient(v000, v100, v010, v110, v001, v101, v011, v111,
                              e000, e100, e010, e110, e001, e101, e011, e111, wx, wy, wz):
     """Value, derivatives along the index axes and change over the snapshot interval of
@@ -200,7 +200,7 @@ def _trilinear_with_gradient(v000, v100, v010, v110, v001, v101, v011, v111,
     return val, ex0 + wz * (ex1 - ex0), ey0 + wz * (ey1 - ey0), b1 - b0, h0 + wz * (h1 - h0)
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, no_cfunc_wrapper=True, inline="always", error_model="numpy")
 def _gradient_at(f, n0, n1, wt, i0, i1, wx, j0, j1, wy, dyc, k0, k1, wz, u, g, dudt):
     """u, g, ∂u/∂t (u⁺ units) at a located point inside the stored y range. The 8 nodes
     are read once each, all 3 components together (they are adjacent in memory)."""
@@ -228,7 +228,7 @@ def _gradient_at(f, n0, n1, wt, i0, i1, wx, j0, j1, wy, dyc, k0, k1, wz, u, g, d
                      wx, wy, wz, inv_dx, inv_dy, inv_dz, inv_dt, u, g, dudt)
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, no_cfunc_wrapper=True, inline="always", error_model="numpy")
 def _store_component(f, c, v000, v100, v010, v110, v001, v101, v011, v111,
                      e000, e100, e010, e110, e001, e101, e011, e111,
                      wx, wy, wz, inv_dx, inv_dy, inv_dz, inv_dt, u, g, dudt):
@@ -244,7 +244,7 @@ def _store_component(f, c, v000, v100, v010, v110, v001, v101, v011, v111,
     dudt[c] = et * sc * inv_dt
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, no_cfunc_wrapper=True, inline="always", error_model="numpy")
 def _sublayer_with_gradient(f, yp, u, g, dudt):
     # SPEC §3 viscous sublayer between the wall and the first cell centre (slope s = 1),
     # or linear to zero at a rough bed's floor (s = 0); heights from the floor
@@ -270,7 +270,7 @@ def _sublayer_with_gradient(f, yp, u, g, dudt):
     g[2, 1] = u1z / y1
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, no_cfunc_wrapper=True, inline="always")
 def _node_velocity(d, n0, n1, wt, i, j, k):
     """The three stored components at node (i, j, k), linear in time (``_node3``
     without the changes)."""
@@ -278,7 +278,7 @@ def _node_velocity(d, n0, n1, wt, i, j, k):
     return v[0], v[1], v[2]
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, no_cfunc_wrapper=True, inline="always")
 def gather_cell(f, n0, n1, wt, i0, i1, j0, j1, k0, k1):
     """The 8 nodes of a located cell, each read once with its 3 components (adjacent in
     memory) and blended in time: 24 raw values, node by node in the order 000, 100,
@@ -297,7 +297,7 @@ def gather_cell(f, n0, n1, wt, i0, i1, j0, j1, k0, k1):
             g[0], g[1], g[2], h[0], h[1], h[2], m[0], m[1], m[2], q[0], q[1], q[2])
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, no_cfunc_wrapper=True, inline="always", error_model="numpy")
 def velocity_in_cell(f, c, wx, wy, wz, yp, sublayer):
     """Velocity (u⁺, three floats) at weights (wx, wy, wz) inside a gathered cell
     (``gather_cell``); the SPEC §3 sublayer law when ``sublayer`` (yp < y[0]).
@@ -318,7 +318,7 @@ def velocity_in_cell(f, c, wx, wy, wz, yp, sublayer):
     return u0, u1, u2
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, no_cfunc_wrapper=True, inline="always", error_model="numpy")
 def _velocity_at_height(f, n0, n1, wt, i0, i1, wx, k0, k1, wz, yp, u):
     """Velocity only (u⁺) at height yp with the x, z and time location already known.
     Zero below the wall. Returns the status code."""
@@ -333,7 +333,7 @@ def _velocity_at_height(f, n0, n1, wt, i0, i1, wx, k0, k1, wz, yp, u):
     return status
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, no_cfunc_wrapper=True, inline="always", error_model="numpy")
 def _gradient_at_height(f, n0, n1, wt, i0, i1, wx, k0, k1, wz, yp, u, g, dudt):
     """u, g, ∂u/∂t (wall units) at height yp with the x, z and time location known."""
     status, j0, j1, wy, dyc, sublayer = wall_normal(f, yp)
@@ -354,7 +354,7 @@ def _gradient_at_height(f, n0, n1, wt, i0, i1, wx, k0, k1, wz, yp, u, g, dudt):
     return status
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, no_cfunc_wrapper=True, inline="always", error_model="numpy")
 def locate_xzt(f, xp, zp, tp):
     """Periodic x and z cells and the looping time interval of a point."""
     i0, i1, wx = _locate_periodic(xp, f.x0, f.dx, f.nx)
@@ -365,7 +365,7 @@ def locate_xzt(f, xp, zp, tp):
     return i0, i1, wx, k0, k1, wz, n0, n1, wt
 
 
-@njit(cache=True, error_model="numpy", _nrt=False, fastmath={"contract"})
+@njit(cache=True, no_cfunc_wrapper=True, error_model="numpy", _nrt=False, fastmath={"contract"})
 def sample_point(f, xp, yp, zp, tp, u, g, dudt, with_gradient=True):
     """Velocity u (3,), gradient g[i, j] = ∂u_i/∂x_j (3, 3) and ∂u/∂t (3,) at one point.
 
@@ -377,7 +377,7 @@ def sample_point(f, xp, yp, zp, tp, u, g, dudt, with_gradient=True):
     return _velocity_at_height(f, n0, n1, wt, i0, i1, wx, k0, k1, wz, yp, u)
 
 
-@njit(cache=True, error_model="numpy", _nrt=False, fastmath={"contract"})
+@njit(cache=True, no_cfunc_wrapper=True, error_model="numpy", _nrt=False, fastmath={"contract"})
 def sample_column(f, xp, yp, zp, tp, y_top, y_bottom, u, g, dudt, u_top, u_bottom, with_gradient=True):
     """``sample_point`` at (xp, yp, zp) (with gradient unless with_gradient=False: then g
     and dudt are left as they are) plus the velocity alone at the heights y_top and
@@ -393,7 +393,7 @@ def sample_column(f, xp, yp, zp, tp, y_top, y_bottom, u, g, dudt, u_top, u_botto
     return status
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, no_cfunc_wrapper=True, inline="always")
 def vorticity_from_gradient(g, w):
     """ω = ∇ × u from g[i, j] = ∂u_i/∂x_j."""
     w[0] = g[2, 1] - g[1, 2]
@@ -401,7 +401,7 @@ def vorticity_from_gradient(g, w):
     w[2] = g[1, 0] - g[0, 1]
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, no_cfunc_wrapper=True, parallel=True)
 def sample_many(f, points, tp, u, g, dudt, status):
     """Parallel over points: fill u (N,3), g (N,3,3), dudt (N,3), status (N,)."""
     n = points.shape[0]
@@ -411,7 +411,7 @@ def sample_many(f, points, tp, u, g, dudt, status):
         )
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, no_cfunc_wrapper=True, parallel=True)
 def sample_velocity_many(f, points, tp, u, status):
     """Parallel over points: velocity only."""
     n = points.shape[0]

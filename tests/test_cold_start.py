@@ -28,7 +28,7 @@ RUN = textwrap.dedent("""
     before = cold_start.is_cached(stable_argsort, cold_start.typed(__import__("numpy").zeros(3)))
     started = []
     start = cold_start.compile_elsewhere
-    cold_start.compile_elsewhere = lambda *a: (started.append(a[0].py_func.__name__), start(*a))[1]
+    cold_start.compile_elsewhere = lambda jobs: (started.append([k.py_func.__name__ for k, _ in jobs]), start(jobs))[1]
     res = saltation.run("cases/default.toml", out=sys.argv[1], progress=False, overwrite=True,
                         **{"run.n_particles": 40, "run.duration": 0.05, "output.vtk": False})
     # (loaded from the cache, compiled here, compiled signatures) of each kernel in this process
@@ -55,7 +55,7 @@ def test_the_helpers_contact_phase_is_used_and_the_run_is_the_same(tmp_path):
     cold, out_cold = _run(tmp_path, "cold", cache)
     # the contact phase came from the helper through the cache; the free flight and the bed
     # were compiled here once, for the types the step calls them with (no second signature)
-    assert cold["helpers"] == ["soft_contact_phase"] and cold["contact"] == [1, 0, 1], cold
+    assert cold["helpers"] == [["soft_contact_phase"]] and cold["contact"] == [1, 0, 1], cold
     assert cold["flight"] == [0, 1, 1] and cold["bed"] == [0, 1, 1], cold
     assert cold["argsort_cached_before"] is False and cold["argsort_cached_after"] is True, cold
     # a second run starts no helper (the step is cached), compiles nothing, gives the same run
@@ -66,6 +66,44 @@ def test_the_helpers_contact_phase_is_used_and_the_run_is_the_same(tmp_path):
     assert len(a["jumps/particle"]) > 0 and a.keys() == b.keys()
     for key in a:
         assert np.array_equal(a[key], b[key]), key
+
+
+COMPOSITES = textwrap.dedent("""
+    import json, sys
+    import saltation
+    from saltation.contacts import composites
+    from saltation.engine import cold_start
+    from saltation.flight import composites as flight
+    started = []
+    start = cold_start.compile_elsewhere
+    cold_start.compile_elsewhere = lambda jobs: (started.append([k.py_func.__name__ for k, _ in jobs]), start(jobs))[1]
+    saltation.run("cases/default.toml", out=sys.argv[1], progress=False, overwrite=True,
+                  **{"particle.shape": "mixture", "run.n_particles": 40, "run.duration": 0.05, "output.vtk": False})
+    count = lambda k: [sum(k._cache_hits.values()), sum(k._cache_misses.values()), len(k.overloads)]
+    kernels = [flight.free_flight_pass, composites.advance_clusters_contacts, composites._reach,
+               composites._build_list, composites._poses, composites._engage, composites.component_forces,
+               composites._move_par, composites._move_ser, composites._force_kick_par, composites._force_kick_ser,
+               composites._finish]
+    kernels = {k.py_func.__name__: count(k) for k in kernels}
+    print(json.dumps({"helpers": started, "kernels": kernels}))
+""")
+
+
+def test_composites_split_their_contact_phase_between_the_two_processes(tmp_path):
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cache"), PYTHONPATH=str(ROOT))
+    env.pop("SALTATION_SERIAL_COMPILE", None)
+    proc = subprocess.run([sys.executable, "-c", COMPOSITES, str(tmp_path / "run")], cwd=ROOT, env=env,
+                          capture_output=True, text=True, timeout=1200)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    res = json.loads(proc.stdout.strip().splitlines()[-1])
+    (helper,) = res["helpers"]  # one helper, given the sub-step kernels
+    assert helper == ["_poses", "_engage", "component_forces", "_move_par", "_move_ser", "_force_kick_par",
+                      "_force_kick_ser", "_finish"], res
+    for name, (hits, misses, sigs) in res["kernels"].items():
+        if name in helper:  # compiled by the helper, loaded here by the step: never compiled here
+            assert (hits, misses, sigs) == (1, 0, 1), (name, res)
+        else:  # the run's own share and the step: compiled here once, for one signature
+            assert (hits, misses, sigs) == (0, 1, 1), (name, res)
 
 
 def test_no_helper_on_request(monkeypatch):

@@ -34,7 +34,7 @@ def jump_thresholds(dt: float, tau_star: float, alpha: float) -> tuple[float, fl
     return float(dt), max(CONTACT_RESOLUTION, 0.5 * (alpha / tau_star) * dt * dt)
 
 
-@njit(cache=True, _nrt=False, inline="always")
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False, inline="always")
 def close_jump(st, p, t_start, length, height, t_hit, min_duration, min_height):
     """A bed contact of grain p at t_hit ends the flight begun at t_start (length, height
     of the grain's bottom above the bed top, in d). Records a jump in ``st.jump_buf`` and

@@ -144,7 +144,7 @@ def _circumcircle(p, q, r):
     return ux, uz, math.hypot(ax - ux, az - uz)
 
 
-@njit(cache=True, _nrt=False, inline="always")
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False, inline="always")
 def bed_cell(pb, x, z):
     """(ix, iz) of the bed cell holding the point (x, z) (periodic)."""
     lx, lz = pb.box[0], pb.box[2]
@@ -153,28 +153,28 @@ def bed_cell(pb, x, z):
     return min(int(sx / pb.size[0]), pb.ncell[0] - 1), min(int(sz / pb.size[2]), pb.ncell[2] - 1)
 
 
-@njit(cache=True, _nrt=False, inline="always")
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False, inline="always")
 def bed_stencil_cell(pb, ix, iz, s):
     """Cell id of entry s (0..8) of the 3 × 3 cells around (ix, iz); one layer in y."""
     nx, nz = pb.ncell[0], pb.ncell[2]
     return ((ix + s // 3 - 1) % nx) * nz + (iz + s % 3 - 1) % nz
 
 
-@njit(cache=True, _nrt=False, inline="always")
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False, inline="always")
 def bed_offset(pb, k, x, y, z):
     """Minimum-image offset (x, y, z) − centre of bed sphere k."""
     return (min_image(x - pb.centres[k, 0], pb.box[0], 1), y - pb.centres[k, 1],
             min_image(z - pb.centres[k, 2], pb.box[2], 1))
 
 
-@njit(cache=True, _nrt=False, inline="always")
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False, inline="always")
 def end_jump(st, p, length, height, t_hit, bed):
     """A bed impact at t_hit ends grain p's flight (length, height in d): a jump if it
     was one (bed/jumps.py)."""
     close_jump(st, p, st.jump_t0[p], length, height, t_hit, bed[BED_MIN_JUMP_DURATION], bed[BED_MIN_JUMP_HEIGHT])
 
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False)
 def _nearest_entry(pb, x, y, z, u, v, w, limit, reach):
     """The overlapped bed sphere the grain at (x, y, z) moving with (u, v, w) entered
     first within the last ``limit`` time: (sphere id or −1, τ ≤ limit). ``reach``: the
@@ -205,7 +205,7 @@ def _nearest_entry(pb, x, y, z, u, v, w, limit, reach):
     return best, best_tau
 
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False)
 def bed_overlap(pb, x, y, z):
     """Largest overlap (d) of a grain at (x, y, z) with any bed sphere (0 if none)."""
     worst = 0.0
@@ -221,7 +221,7 @@ def bed_overlap(pb, x, y, z):
     return worst
 
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False)
 def _push_out(pb, pos):
     """Move the grain radially out of every bed sphere it overlaps (Gauss–Seidel);
     returns True when it overlapped any."""
@@ -252,7 +252,7 @@ def _push_out(pb, pos):
     return touched
 
 
-@njit(cache=True, error_model="numpy", _nrt=False)
+@njit(cache=True, no_cfunc_wrapper=True, error_model="numpy", _nrt=False)
 def packed_bed_check_particle(st, w, p, t, dt, step, coef_bed, pb, last_contact):
     """Impacts of grain p on the packed bed after its move in step ``step`` (t → t + dt);
     module docstring. coef_bed = (e, f, ...). last_contact (N,) int64: the last step in

@@ -67,7 +67,7 @@ def cut_for(st) -> float:
     return max(1.0, BED_RADIUS + 0.5 * float(st.d_comp.max()))
 
 
-@njit(cache=True, _nrt=False, error_model="numpy")
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False, error_model="numpy")
 def _component_world(st, w, p, k):
     rot = w.rot[p]
     rx = rot[0, 0] * st.r_body[k, 0] + rot[0, 1] * st.r_body[k, 1] + rot[0, 2] * st.r_body[k, 2]
@@ -76,7 +76,7 @@ def _component_world(st, w, p, k):
     return rx, ry, rz
 
 
-@njit(cache=True, _nrt=False, error_model="numpy")
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False, error_model="numpy")
 def _first_entry(st, w, p, pb, limit):
     """(component, bed sphere, τ) of the contact entered first within ``limit`` for grain
     p at its current state (w.rot[p] must hold its orientation); bed sphere −1: none."""
@@ -101,7 +101,7 @@ def _first_entry(st, w, p, pb, limit):
     return best_k, best_j, best_tau
 
 
-@njit(cache=True, _nrt=False, error_model="numpy")
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False, error_model="numpy")
 def _move(st, w, p, h):
     """Rigid motion of grain p over time h (negative: back) with its current (v, Ω)."""
     x = w.x[p]
@@ -117,7 +117,7 @@ def _move(st, w, p, h):
     _quat_to_matrix(q[0], q[1], q[2], q[3], w.rot[p])
 
 
-@njit(cache=True, _nrt=False, error_model="numpy")
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False, error_model="numpy")
 def _push_out(st, w, p, pb):
     """Translate grain p out of every bed sphere a component overlaps; True if any did."""
     touched = False
@@ -158,7 +158,7 @@ def _push_out(st, w, p, pb):
     return touched
 
 
-@njit(cache=True, _nrt=False, error_model="numpy")
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False, error_model="numpy")
 def packed_bed_check_cluster(st, w, p, t, dt, step, bed, pb, last_contact):
     """Impacts of composite p on the packed bed after its move in step ``step``
     (t → t + dt); module docstring. bed = (e, f, ...). last_contact (N,) int64: the last
@@ -227,7 +227,7 @@ def packed_bed_check_cluster(st, w, p, t, dt, step, bed, pb, last_contact):
     return hits
 
 
-@njit(cache=True, parallel=True, error_model="numpy")
+@njit(cache=True, no_cfunc_wrapper=True, parallel=True, error_model="numpy")
 def packed_bed_pass(st, w, t, dt, step, bed, pb, last_contact, skip):
     """packed_bed_check_cluster for every grain (in parallel) but those with skip[p] ≠ 0
     (the contact phase's sub-stepped grains, which had their bed contacts there as soft
@@ -245,7 +245,7 @@ def packed_bed_pass(st, w, t, dt, step, bed, pb, last_contact, skip):
     return total
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, no_cfunc_wrapper=True, error_model="numpy")
 def min_bed_gap(st, pb):
     """Smallest (distance − contact distance) of any component to any bed sphere (Dn);
     negative: an overlap. For tests and checks."""

@@ -140,7 +140,7 @@ def coefficient_set(name=DEFAULT_SET, tau_ratio=None, *, restitution=None, frict
 
 
 # ------------------------------------------------------------------ impulse
-@njit(cache=True, _nrt=False)
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False)
 def _rebound(u, omega, n0, n1, n2, e, f, r):
     # the impulse of SPEC §4 for the unit normal (n0, n1, n2)
     un = u[0] * n0 + u[1] * n1 + u[2] * n2
@@ -181,7 +181,7 @@ def _rebound(u, omega, n0, n1, n2, e, f, r):
     return SLIDE
 
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False)
 def rebound(u, omega, n, e, f, r=PARTICLE_RADIUS):
     """Hard-sphere rebound on a fixed sphere, in place (SPEC §4).
 
@@ -192,7 +192,7 @@ def rebound(u, omega, n, e, f, r=PARTICLE_RADIUS):
     return _rebound(u, omega, n[0], n[1], n[2], e, f, r)
 
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False)
 def bed_rebound(u, omega, n, e, f, r=PARTICLE_RADIUS):
     """Rebound on the bed grain with normal ``n``, followed, if the grain would
     still move downwards (u_y < 0), by a second impact on the horizontal bed
@@ -208,7 +208,7 @@ def bed_rebound(u, omega, n, e, f, r=PARTICLE_RADIUS):
 
 
 # ------------------------------------------------------------------ virtual bed
-@njit(cache=True, _nrt=False)
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False)
 def virtual_bed_normal(u_in, xi1, xi2, max_tilt, out, min_incidence=MIN_INCIDENCE):
     """Random contact normal on a virtual rough bed (rule in the module docstring).
 

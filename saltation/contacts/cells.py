@@ -107,7 +107,7 @@ def allocate_cells(n_particles: int, grid: CellGrid):
             np.zeros(n_particles, np.int64))
 
 
-@njit(cache=True)
+@njit(cache=True, no_cfunc_wrapper=True)
 def grid_shape(box, cut):
     """Cells per axis (3,) int64 (≥ 1) and their edges (3,) for cells at least ``cut`` wide
     (make_grid's rule, callable inside kernels that size their grid per step)."""
@@ -119,7 +119,7 @@ def grid_shape(box, cut):
     return n, size
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, no_cfunc_wrapper=True, inline="always")
 def axis_index(x, n, size, length, periodic):
     """Cell layer of coordinate x on an axis of n cells of ``size`` (wrapped or clamped)."""
     if periodic:
@@ -138,7 +138,7 @@ def axis_index(x, n, size, length, periodic):
     return int(f)
 
 
-@njit(cache=True)
+@njit(cache=True, no_cfunc_wrapper=True)
 def cell_index(grid, x, y, z):
     """Linear cell id of the point (x, y, z) (wrapped on periodic axes, clamped otherwise)."""
     n, h, b, p = grid.n, grid.size, grid.box, grid.periodic
@@ -148,7 +148,7 @@ def cell_index(grid, x, y, z):
     return (ix * n[1] + iy) * n[2] + iz
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, no_cfunc_wrapper=True, parallel=True)
 def _cell_ids(pos, grid, cell_of):
     n, h, b, p = grid.n, grid.size, grid.box, grid.periodic
     nx, ny, nz = n[0], n[1], n[2]
@@ -162,7 +162,7 @@ def _cell_ids(pos, grid, cell_of):
         cell_of[i] = (ix * ny + iy) * nz + iz
 
 
-@njit(cache=True)
+@njit(cache=True, no_cfunc_wrapper=True)
 def stable_argsort(key):
     """np.argsort(key, kind="mergesort") for keys that are not NaN: the indices that sort
     ``key``, equal keys in their original order (a bottom-up merge sort; Numba's own
@@ -199,7 +199,7 @@ def stable_argsort(key):
     return a
 
 
-@njit(cache=True)
+@njit(cache=True, no_cfunc_wrapper=True)
 def _counting_sort(cell_of, cell_start, cell_count, order):
     cell_count[:] = 0
     for i in range(cell_of.shape[0]):
@@ -216,14 +216,14 @@ def _counting_sort(cell_of, cell_start, cell_count, order):
         cell_start[c] -= cell_count[c]
 
 
-@njit(cache=True)
+@njit(cache=True, no_cfunc_wrapper=True)
 def build_cells(pos, grid, cell_of, cell_start, cell_count, order):
     """Counting sort of the grains into cells (module docstring)."""
     _cell_ids(pos, grid, cell_of)
     _counting_sort(cell_of, cell_start, cell_count, order)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, no_cfunc_wrapper=True, inline="always")
 def _layers(k, n, periodic):
     """Neighbouring layer indices of layer k along an axis of n layers, each once:
     (how many, first, second, third)."""
@@ -242,7 +242,7 @@ def _layers(k, n, periodic):
     return 3, k - 1, k, k + 1
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, no_cfunc_wrapper=True, inline="always")
 def _pick(s, a, b, c):
     if s == 0:
         return a
@@ -251,7 +251,7 @@ def _pick(s, a, b, c):
     return c
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, no_cfunc_wrapper=True, inline="always")
 def _layer(k, n, periodic, s):
     """s-th (0..2) neighbouring layer of layer k, or −1 where it does not exist or repeats
     one already given (an axis of one or two layers); the order of ``_layers``."""
@@ -267,7 +267,7 @@ def _layer(k, n, periodic, s):
     return j
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, no_cfunc_wrapper=True, inline="always")
 def stencil_cell(ix, iy, iz, n, periodic, s):
     """Cell of entry s (0..26) of the 3×3×3 stencil around cell (ix, iy, iz), x outermost
     and z innermost (the order of ``stencil_cells``); −1 where that neighbour does not
@@ -280,7 +280,7 @@ def stencil_cell(ix, iy, iz, n, periodic, s):
     return (cx * n[1] + cy) * n[2] + cz
 
 
-@njit(cache=True)
+@njit(cache=True, no_cfunc_wrapper=True)
 def sort_points(pos, ids, box, n, size, periodic):
     """Counting sort of the points pos[ids] into the cells (n, size) of ``box``:
     (cell_start, cell_count, order), ``order`` holding positions into ``ids``; stable, as
@@ -300,7 +300,7 @@ def sort_points(pos, ids, box, n, size, periodic):
     return start, count, order
 
 
-@njit(cache=True)
+@njit(cache=True, no_cfunc_wrapper=True)
 def stencil_cells(grid, c, out):
     """The distinct cells of the 3×3×3 stencil around cell c, into ``out`` (≥ 27 long);
     returns how many. Periodic axes wrap, bounded axes are clipped; fixed order."""
@@ -322,7 +322,7 @@ def stencil_cells(grid, c, out):
     return m
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, no_cfunc_wrapper=True, inline="always")
 def min_image(dx, length, periodic):
     """Minimum-image separation along one axis. Exactly antisymmetric in dx for every
     pair closer than half the box (both grains of a pair see the negated value)."""
@@ -331,7 +331,7 @@ def min_image(dx, length, periodic):
     return dx
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, no_cfunc_wrapper=True, inline="always")
 def _layer_gaps(x, k, n, size, length, periodic, l0, l1, l2):
     """Lower bounds on the distance along one axis from a grain at x (in layer k) to each of
     the stencil layers l0, l1, l2 of ``_layers`` (0 for its own layer): a neighbouring
@@ -349,7 +349,7 @@ def _layer_gaps(x, k, n, size, length, periodic, l0, l1, l2):
     return g0, g1, g2
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, no_cfunc_wrapper=True, parallel=True)
 def build_neighbour_list(pos, grid, cell_of, cell_start, cell_count, order, cutoff, nbr, nbr_count):
     """Full neighbour list: every j ≠ i with |x_i − x_j| < cutoff (minimum image).
 
@@ -423,7 +423,7 @@ def build_neighbour_list(pos, grid, cell_of, cell_start, cell_count, order, cuto
     return largest.max() if n > 0 else 0
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, no_cfunc_wrapper=True, inline="always")
 def _sort_row(row, m):
     """Insertion sort of row[:m] (a few dozen ids, mostly in runs from the stencil cells)."""
     for k in range(1, m):
@@ -435,7 +435,7 @@ def _sort_row(row, m):
         row[q + 1] = v
 
 
-@njit(cache=True)
+@njit(cache=True, no_cfunc_wrapper=True)
 def _pairs_from_list(nbr, nbr_count, total):
     out = np.empty((total, 2), np.int64)
     m = 0

@@ -140,7 +140,7 @@ from ..physics.history import history_mark_impact
 from .cells import axis_index, grid_shape, min_image, sort_points, stencil_cell
 from .path import hermite_weights
 
-__all__ = ["ClusterContacts", "make_cluster_contacts", "with_packed_bed", "contact_parameters", "substeps", "contact_phase",
+__all__ = ["ClusterContacts", "compile_jobs", "make_cluster_contacts", "with_packed_bed", "contact_parameters", "substeps", "contact_phase",
            "build_contact_list",
            "advance_clusters_contacts", "component_forces", "brute_force_pairs", "listed_pairs",
            "point_effective_masses", "DEFAULT_SKIN"]
@@ -214,13 +214,13 @@ ClusterContactsRefType, ClusterContactsRef = struct_ref(ClusterContacts, __name_
 # The parallel kernels take the three tuples as StructRefs (one pointer each, grains/refs.py)
 # and loop over chunks of grains (flight.composites.CHUNK); each chunk reads them as tuples
 # again (as_tuple), so that the per-grain functions below see tuples, as the hot loops must.
-@njit(cache=True)
+@njit(cache=True, no_cfunc_wrapper=True)
 def _refs(st, w, cc):
     """The three tuples as StructRefs over the same arrays (grains/refs.py)."""
     return ClusterStateRef(*st), ClusterWorkRef(*w), ClusterContactsRef(*cc)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, no_cfunc_wrapper=True, inline="always")
 def _views(sr, wr, cr):
     """The three StructRefs as tuples again, for a chunk of grains."""
     return as_tuple(sr, ClusterState), as_tuple(wr, ClusterWork), as_tuple(cr, ClusterContacts)
@@ -306,14 +306,14 @@ def with_packed_bed(cc: ClusterContacts, pb, restitution: float, friction: float
 
 
 # ----------------------------------------------------------------------------- small kernels
-@njit(cache=True, inline="always")
+@njit(cache=True, no_cfunc_wrapper=True, inline="always")
 def _qmul(a0, a1, a2, a3, b0, b1, b2, b3):
     return (a0 * b0 - a1 * b1 - a2 * b2 - a3 * b3, a0 * b1 + a1 * b0 + a2 * b3 - a3 * b2,
             a0 * b2 - a1 * b3 + a2 * b0 + a3 * b1, a0 * b3 + a1 * b2 - a2 * b1 + a3 * b0)
 
 
 # ----------------------------------------------------------------------------- engagement
-@njit(cache=True, parallel=True)
+@njit(cache=True, no_cfunc_wrapper=True, parallel=True)
 def _reach(st, w, cc, dt):
     """D_i (Hermite path bound) and the slerp angle φ_i of every grain; x1 saved.
     (Parallel bodies are separate functions: writes through a NamedTuple's attribute
@@ -326,7 +326,7 @@ def _reach(st, w, cc, dt):
             _reach_one(sv, wv, cv, p, dt)
 
 
-@njit(cache=True)
+@njit(cache=True, no_cfunc_wrapper=True)
 def _reach_one(st, w, cc, p, dt):
     x0 = w.x0[p]
     x1 = cc.x1[p]
@@ -352,7 +352,7 @@ def _reach_one(st, w, cc, p, dt):
     cc.phi[p] = 2.0 * math.acos(min(1.0, dot))
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, no_cfunc_wrapper=True, parallel=True)
 def _engage_pass(pos, ok, rho, reach, skin, box, n, size, start, count, order, ids, active):
     for q in prange(ids.shape[0]):
         i = ids[q]
@@ -380,7 +380,7 @@ def _engage_pass(pos, ok, rho, reach, skin, box, n, size, start, count, order, i
         active[i] = hit
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, no_cfunc_wrapper=True, inline="always")
 def _path_bottom(w, cc, p):
     """A lower bound of grain p's lowest point on its free path in the step: the lower
     end minus the Hermite bulge (D_i − chord) and the bounding radius ρ_i."""
@@ -390,7 +390,7 @@ def _path_bottom(w, cc, p):
     return min(w.x0[p, 1], cc.x1[p, 1]) - (cc.reach[p] - math.sqrt(chord)) - cc.rho[p]
 
 
-@njit(cache=True)
+@njit(cache=True, no_cfunc_wrapper=True)
 def _engage(st, w, cc):
     """Mark the active grains (module docstring, step 2) and list them in cc.act."""
     n = st.pos.shape[0]
@@ -411,7 +411,7 @@ def _engage(st, w, cc):
             rmax = max(rmax, cc.rho[p])
             dmax = max(dmax, cc.reach[p])
     cut = min(2.0 * (rmax + dmax) + skin, 0.5 * min(box[0], box[2]))
-    pos = w.x0[:, 0:3]
+    pos = np.ascontiguousarray(w.x0[:, 0:3])  # C layout: sort_points compiles once (as for cc.cp)
     gn, size = grid_shape(box, cut)
     start, count, order = sort_points(pos, ids, box, gn, size, PERIODIC)
     cc.active[:] = 0
@@ -436,7 +436,7 @@ def _engage(st, w, cc):
 
 
 # ----------------------------------------------------------------------------- neighbour list
-@njit(cache=True, parallel=True)
+@njit(cache=True, no_cfunc_wrapper=True, parallel=True)
 def _list_pass(cp, comps, grain_of, dcomp, creach, skin, box, n, size, start, count, order, nbr, cnt):
     cap = nbr.shape[1]
     most = np.zeros(comps.shape[0], np.int64)
@@ -468,7 +468,7 @@ def _list_pass(cp, comps, grain_of, dcomp, creach, skin, box, n, size, start, co
     return most.max() if comps.shape[0] > 0 else 0
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, no_cfunc_wrapper=True, parallel=True)
 def _bed_list_pass(cp, comps, dcomp, creach, skin, pb, nbr, cnt):
     """Append to the row of each listed component the packed bed's spheres (ids −1 − j,
     diameter 1) within the pair cutoff ½(d_a + 1) + m_a + s, found through the bed's
@@ -504,7 +504,7 @@ def _bed_list_pass(cp, comps, dcomp, creach, skin, pb, nbr, cnt):
     return most.max() if comps.shape[0] > 0 else 0
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, no_cfunc_wrapper=True, parallel=True)
 def _transfer(comps, nbr, cnt, shear, nbr2, cnt2, shear2):
     for q in prange(comps.shape[0]):
         a = comps[q]
@@ -521,7 +521,7 @@ def _transfer(comps, nbr, cnt, shear, nbr2, cnt2, shear2):
                     break
 
 
-@njit(cache=True)
+@njit(cache=True, no_cfunc_wrapper=True)
 def _build_list(st, cc, pb):
     """Neighbour list of the active grains' components at their current centres cc.cp
     (with a packed bed ``pb``, bed.packed.PackedBed, its spheres too; None: none),
@@ -591,7 +591,7 @@ def _build_list(st, cc, pb):
 
 
 # ----------------------------------------------------------------------------- poses and forces
-@njit(cache=True, inline="always")
+@njit(cache=True, no_cfunc_wrapper=True, inline="always")
 def _free_momentum(ib, f0, f1, f2, f3, o0, o1, o2):
     """R I_b Rᵀ Ω for the orientation (f0..f3) and world angular velocity (o0, o1, o2)."""
     r00 = 1.0 - 2.0 * (f2 * f2 + f3 * f3)
@@ -612,7 +612,7 @@ def _free_momentum(ib, f0, f1, f2, f3, o0, o1, o2):
     return (r00 * c0 + r01 * c1 + r02 * c2, r10 * c0 + r11 * c1 + r12 * c2, r20 * c0 + r21 * c1 + r22 * c2)
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, no_cfunc_wrapper=True, parallel=True)
 def _poses(st, w, cc, s, dt):
     """Pose of every active grain at σ = s on its free path plus deviation, its world
     inverse inertia and its components' world centres."""
@@ -624,7 +624,7 @@ def _poses(st, w, cc, s, dt):
             _pose_one(sv, wv, cv, cv.act[q], s, dt)
 
 
-@njit(cache=True)
+@njit(cache=True, no_cfunc_wrapper=True)
 def _pose_one(st, w, cc, p, s, dt):
     x0 = w.x0[p]
     x1 = cc.x1[p]
@@ -690,7 +690,7 @@ def _pose_one(st, w, cc, p, s, dt):
             cc.cp[k, i] = cc.P[p, i] + rot[i, 0] * r0 + rot[i, 1] * r1 + rot[i, 2] * r2
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, no_cfunc_wrapper=True, parallel=True)
 def component_forces(st, cc, h, sig):
     """Contact force and torque on every active grain from its component contacts
     (module docstring) at the current poses (cc.P, cc.V, cc.Om, cc.cp); ``h`` the
@@ -705,7 +705,7 @@ def component_forces(st, cc, h, sig):
             _grain_force(sv, cv, cv.act[q], h, sig)
 
 
-@njit(cache=True)
+@njit(cache=True, no_cfunc_wrapper=True)
 def _grain_force(st, cc, p, h, sig):
     # σ a run-time float (not a literal flag): one compiled copy serves set-up and sub-steps
     update = sig > 0.0
@@ -824,7 +824,7 @@ def _grain_force(st, cc, p, h, sig):
         cc.in_bed[p] = 1 if nbed > 0 else 0
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, no_cfunc_wrapper=True, inline="always")
 def _bed_impact(st, cc, p, t_hit):
     """A bed contact of grain p begins at t_hit: a bed impact; it ends a jump if the grain
     was airborne since an earlier step (SPEC §6, as bed/packed_composites.py), and the
@@ -837,7 +837,7 @@ def _bed_impact(st, cc, p, t_hit):
     st.jump_x0[p] = cc.P[p, 0]
 
 
-@njit(cache=True)
+@njit(cache=True, no_cfunc_wrapper=True)
 def _kick_one(st, cc, p, k):
     """δv += k F/m, δL += k T, and δΩ += k I_w⁻¹ T (Ω = I_w⁻¹(L_f + δL) is linear in δL:
     the drift that follows must turn the grain with the kicked spin, as it moves it
@@ -853,7 +853,7 @@ def _kick_one(st, cc, p, k):
     cc.dL[p, 2] += t2
 
 
-@njit(cache=True)
+@njit(cache=True, no_cfunc_wrapper=True)
 def _move_one(st, w, cc, p, h, half_skin, sig, dt):
     _kick_one(st, cc, p, 0.5 * h)
     over = _drift_one(st, cc, p, h, half_skin)
@@ -861,7 +861,7 @@ def _move_one(st, w, cc, p, h, half_skin, sig, dt):
     return over
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, no_cfunc_wrapper=True, parallel=True)
 def _move_par(sr, wr, cr, h, half_skin, sig, dt):
     n = cr.n_act[0]
     over = np.zeros(n, np.int64)
@@ -872,7 +872,7 @@ def _move_par(sr, wr, cr, h, half_skin, sig, dt):
     return over.sum()
 
 
-@njit(cache=True)
+@njit(cache=True, no_cfunc_wrapper=True)
 def _move_ser(sr, wr, cr, h, half_skin, sig, dt):
     st, w, cc = _views(sr, wr, cr)
     over = 0
@@ -881,7 +881,7 @@ def _move_ser(sr, wr, cr, h, half_skin, sig, dt):
     return over
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, no_cfunc_wrapper=True, parallel=True)
 def _force_kick_par(sr, cr, h, sig):
     n = cr.n_act[0]
     for c in prange((n + CHUNK - 1) // CHUNK):
@@ -892,7 +892,7 @@ def _force_kick_par(sr, cr, h, sig):
             _kick_one(sv, cv, p, 0.5 * h)
 
 
-@njit(cache=True)
+@njit(cache=True, no_cfunc_wrapper=True)
 def _force_kick_ser(sr, cr, h, sig):
     st, cc = as_tuple(sr, ClusterState), as_tuple(cr, ClusterContacts)
     for q in range(cc.n_act[0]):
@@ -901,7 +901,7 @@ def _force_kick_ser(sr, cr, h, sig):
         _kick_one(st, cc, p, 0.5 * h)
 
 
-@njit(cache=True)
+@njit(cache=True, no_cfunc_wrapper=True)
 def _drift_one(st, cc, p, h, half_skin):
     cc.iw[p]
     rot = cc.rot[p]
@@ -929,7 +929,7 @@ def _drift_one(st, cc, p, h, half_skin):
     return 1 if cc.dev[p] > half_skin else 0
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, no_cfunc_wrapper=True, parallel=True)
 def _finish(sr, wr, cr):
     """End state of the grains that touched another one (module docstring, step 4)."""
     n = cr.n_act[0]
@@ -939,7 +939,7 @@ def _finish(sr, wr, cr):
             _finish_one(sv, wv, cv, cv.act[q])
 
 
-@njit(cache=True)
+@njit(cache=True, no_cfunc_wrapper=True)
 def _finish_one(st, w, cc, p):
     if cc.touched[p] != 0:
         x1 = cc.x1[p]
@@ -995,7 +995,7 @@ def _finish_one(st, w, cc, p):
             st.jump_ymax[p] = low
 
 
-@njit(cache=True)
+@njit(cache=True, no_cfunc_wrapper=True, inline="always")  # inlined: one level less for the step to re-link (compile time)
 def build_contact_list(st, w, cc, dt, pb):
     """Steps 2–3 set-up of the contact phase (module docstring): reach of every grain's
     free path from w.x0 (start) to the state st (end), active grains, their poses at
@@ -1029,7 +1029,7 @@ def build_contact_list(st, w, cc, dt, pb):
     return _build_list(st, cc, pb)
 
 
-@njit(cache=True)
+@njit(cache=True, no_cfunc_wrapper=True, inline="always")  # inlined: one level less for the step to re-link (compile time)
 def contact_phase(st, w, cc, dt, n_sub, pb):
     """Grain–grain contacts (and, with a packed bed ``pb``, soft bed contacts; None: none)
     of one hydrodynamic step of length dt, after the free flight of every grain (module
@@ -1062,15 +1062,37 @@ def contact_phase(st, w, cc, dt, n_sub, pb):
     return cc
 
 
+def compile_jobs(st, w, cc, dt, n_sub, pb):
+    """``contact_phase``'s kernel tree in two lists of (kernel, argument types), as
+    contact_phase calls them, with no callee in common, for a first run's compile on two
+    cores (engine/cold_start.py): (set-up: reach and neighbour list; sub-steps: poses,
+    engagement, forces, moves, kicks, ``_finish``). The engine compiles the set-up with
+    the free flight in the run's process and the sub-steps in the helper: two halves of
+    about the same compile time (``contact_phase`` itself is inlined into the step)."""
+    from numba import typeof
+
+    def typed(*values):
+        return tuple(typeof(v) for v in values)
+
+    h = dt / n_sub
+    sr, wr, cr = _refs(st, w, cc)
+    step = typed(sr, wr, cr, h, 0.5 * cc.par[4], 1.0, dt)
+    setup = [(_reach, typed(st, w, cc, dt)), (_build_list, typed(st, cc, pb))]
+    substeps = [(_poses, typed(st, w, cc, 0.0, dt)), (_engage, typed(st, w, cc)), (component_forces, typed(st, cc, h, 0.0)),
+                (_move_par, step), (_move_ser, step), (_force_kick_par, typed(sr, cr, h, 1.0)),
+                (_force_kick_ser, typed(sr, cr, h, 1.0)), (_finish, typed(sr, wr, cr))]
+    return setup, substeps
+
+
 # ----------------------------------------------------------------------------- run loop
-@njit(cache=True)
+@njit(cache=True, no_cfunc_wrapper=True)
 def _clock():
     with objmode(t="float64"):
         t = time.perf_counter()
     return t
 
 
-@njit(cache=True)
+@njit(cache=True, no_cfunc_wrapper=True)
 def advance_clusters_contacts(f, coef, bed, seed, st, w, hc, t0, dt, n_steps, top, cc, n_sub, timers, pb):
     """flight.composites.advance_clusters with grain–grain contacts: free flight (RK4 + bed) of
     every grain, then ``contact_phase`` (pb: the packed bed or None), each step;

@@ -284,7 +284,7 @@ def make_contact_list(pos, box, periodic=(True, False, True), diameter=1.0, skin
     return rebuild(pos, cl)
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, no_cfunc_wrapper=True, parallel=True)
 def _transfer_history(nbr, nbr_count, shear, touch, nbr2, nbr_count2, shear2, touch2):
     """History of the old list (nbr, ...) carried into the new one (nbr2, ...) by id. Only
     entries in contact (or with a spring left) carry any: the others are looked up not
@@ -308,7 +308,7 @@ def _transfer_history(nbr, nbr_count, shear, touch, nbr2, nbr_count2, shear2, to
                     break
 
 
-@njit(cache=True)
+@njit(cache=True, no_cfunc_wrapper=True)
 def rebuild(pos, cl):
     """Rebuild cells and neighbour list at ``pos``, carrying the contact history over;
     returns the ContactList to use from now on (buffers swapped, or grown)."""
@@ -341,7 +341,7 @@ def rebuild(pos, cl):
                        cl.n_touch, cl.collisions, cl.max_overlap, cl.builds)
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, no_cfunc_wrapper=True, parallel=True)
 def _max_displacement2(pos, ref_pos, grid):
     n = pos.shape[0]
     lx, ly, lz = grid.box[0], grid.box[1], grid.box[2]
@@ -361,13 +361,13 @@ def _max_displacement2(pos, ref_pos, grid):
     return part.max()
 
 
-@njit(cache=True)
+@njit(cache=True, no_cfunc_wrapper=True)
 def needs_rebuild(pos, cl):
     """True when some grain moved more than skin/2 since the last build."""
     return _max_displacement2(pos, cl.ref_pos, cl.grid) > 0.25 * cl.skin * cl.skin
 
 
-@njit(cache=True)
+@njit(cache=True, no_cfunc_wrapper=True)
 def update_neighbours(pos, cl):
     """Rebuild when needed (``needs_rebuild``); returns the ContactList to use."""
     if needs_rebuild(pos, cl):
@@ -384,7 +384,7 @@ def reset_counters(cl: ContactList) -> None:
 # --------------------------------------------------------------------------- soft contacts
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, no_cfunc_wrapper=True, parallel=True)
 def contact_forces(pos, vel, spin, model, cl, dt, update_history, force, torque):
     """Soft-sphere contact force and torque on every grain (module docstring), into
     ``force`` and ``torque`` (N, 3), overwritten (not accumulated) — sparsely: only the
@@ -477,7 +477,7 @@ def contact_forces(pos, vel, spin, model, cl, dt, update_history, force, torque)
 # --------------------------------------------------------------------------- granular stepper
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, no_cfunc_wrapper=True, parallel=True)
 def _kick_drift(pos, vel, spin, force, torque, n_touch, acc_ext, inv_m, inv_i, kick, dt, out):
     """v += kick·a, ω += kick·α (grains in contact, or all with an external
     acceleration), x += dt v; out[c] = the largest |v|² in chunk c after the kick."""
@@ -506,7 +506,7 @@ def _kick_drift(pos, vel, spin, force, torque, n_touch, acc_ext, inv_m, inv_i, k
         out[c] = vmax
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, no_cfunc_wrapper=True, parallel=True)
 def _synced_energy(vel, spin, force, torque, n_touch, acc_ext, inv_m, inv_i, lag, out):
     """Kinetic energies (per unit mass and inertia, ×2) of v + lag·a, ω + lag·α, per chunk."""
     n = vel.shape[0]
@@ -530,7 +530,7 @@ def _synced_energy(vel, spin, force, torque, n_touch, acc_ext, inv_m, inv_i, lag
         out[c, 1] = er
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, no_cfunc_wrapper=True, parallel=True)
 def _final_kick(vel, spin, force, torque, n_touch, acc_ext, inv_m, inv_i, kick):
     n = vel.shape[0]
     has_ext = acc_ext.shape[0] == n
@@ -544,7 +544,7 @@ def _final_kick(vel, spin, force, torque, n_touch, acc_ext, inv_m, inv_i, kick):
                 vel[i, a] += kick * acc_ext[i, a]
 
 
-@njit(cache=True)
+@njit(cache=True, no_cfunc_wrapper=True)
 def _advance(pos, vel, spin, force, torque, model, cl, dt, n_steps, acc_ext, record_every, energy):
     inv_m = 1.0 / model.mass
     inv_i = 1.0 / model.inertia
@@ -608,7 +608,7 @@ def advance_granular(pos, vel, spin, force, torque, model: ContactModel, cl: Con
     return cl, (energy if record_every > 0 else None)
 
 
-@njit(cache=True)
+@njit(cache=True, no_cfunc_wrapper=True)
 def kinetic_energy(vel, spin, model):
     """(translational, rotational) kinetic energy of all grains."""
     et = 0.0
@@ -620,7 +620,7 @@ def kinetic_energy(vel, spin, model):
     return 0.5 * model.mass * et, 0.5 * model.inertia * er
 
 
-@njit(cache=True)
+@njit(cache=True, no_cfunc_wrapper=True)
 def _overlaps(pos, cl, d):
     g = cl.grid
     dmax = 0.0
@@ -656,7 +656,7 @@ def overlap_statistics(pos, cl: ContactList, diameter: float = 1.0) -> dict:
 # --------------------------------------------------------------------------- hard spheres
 
 
-@njit(cache=True)
+@njit(cache=True, no_cfunc_wrapper=True)
 def binary_impulse(vi, vj, wi, wj, n, restitution, friction, diameter):
     """Hard-sphere collision of two free equal spheres (module docstring), in place.
 
@@ -714,7 +714,7 @@ def binary_impulse(vi, vj, wi, wj, n, restitution, friction, diameter):
     return True
 
 
-@njit(cache=True)
+@njit(cache=True, no_cfunc_wrapper=True)
 def overlapping_pairs(pos, cl, diameter):
     """Pairs (i < j) closer than ``diameter`` at ``pos``, (M, 2) int64, in a fixed order
     (i ascending, then stencil and cell order); rebuilds ``cl``'s cells (any skin)."""
@@ -750,7 +750,7 @@ def overlapping_pairs(pos, cl, diameter):
     return out[:m]
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, no_cfunc_wrapper=True, inline="always")
 def _separation(pos, g, i, j):
     """Minimum-image x_i − x_j and its length."""
     dx = min_image(pos[i, 0] - pos[j, 0], g.box[0], g.periodic[0])
@@ -759,7 +759,7 @@ def _separation(pos, g, i, j):
     return dx, dy, dz, math.sqrt(dx * dx + dy * dy + dz * dz)
 
 
-@njit(cache=True)
+@njit(cache=True, no_cfunc_wrapper=True)
 def hard_sphere_collisions(pos, vel, spin, cl, restitution, friction, diameter):
     """Binary hard-sphere collisions of every overlapping, approaching pair, at the
     current positions (SPEC §5, dilute option): ``binary_impulse`` pair by pair in the
@@ -784,7 +784,7 @@ def hard_sphere_collisions(pos, vel, spin, cl, restitution, friction, diameter):
     return count
 
 
-@njit(cache=True)
+@njit(cache=True, no_cfunc_wrapper=True)
 def push_apart(pos, cl, diameter, floor, moved):
     """Remove the overlaps binary impulses leave (hard-sphere option): every pair closer
     than d is moved apart along its normal, half the overlap each, in up to
@@ -839,7 +839,7 @@ def kinetic_energy_total(vel, spin, model: ContactModel) -> float:
 # --------------------------------------------------------------------------- test states
 
 
-@njit(cache=True)
+@njit(cache=True, no_cfunc_wrapper=True)
 def _insert_random(n, box, diameter, seed, tries):
     np.random.seed(seed)
     nc = np.maximum(1, np.floor(box / diameter)).astype(np.int64)

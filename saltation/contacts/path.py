@@ -9,7 +9,7 @@ from numba import njit
 __all__ = ["hermite_weights"]
 
 
-@njit(cache=True, inline="always", error_model="numpy", _nrt=False)
+@njit(cache=True, no_cfunc_wrapper=True, inline="always", error_model="numpy", _nrt=False)
 def hermite_weights(s):
     """Cubic Hermite basis at s and its derivatives: x(s) = h00 x₀ + h01 x₁ + Δt(h10 u₀ +
     h11 u₁), dx/ds = d00 (x₀ − x₁) + Δt(d10 u₀ + d11 u₁) (d01 = −d00)."""

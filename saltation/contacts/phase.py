@@ -379,7 +379,7 @@ ContactPhaseRefType, ContactPhaseRef = struct_ref(ContactPhase, __name__)
 BedContextRefType, BedContextRef = struct_ref(BedContext, __name__)
 
 
-@njit(cache=True)
+@njit(cache=True, no_cfunc_wrapper=True)
 def _make_set(c, r):
     c = max(c, 1)
     r = max(r, 1)
@@ -396,20 +396,20 @@ def _make_set(c, r):
     )
 
 
-@njit(cache=True)
+@njit(cache=True, no_cfunc_wrapper=True)
 def substep_view(cs):
     """A SubstepSetRef as its SubstepSet tuple (the same arrays), for Python: tests and
     diagnostics (the StructRef has no attributes outside compiled code)."""
     return as_tuple(cs, SubstepSet)
 
 
-@njit(cache=True)
+@njit(cache=True, no_cfunc_wrapper=True)
 def empty_substep_set():
     """A SubstepSet with no room yet, for the first soft_contact_phase (it grows it)."""
     return _make_set(1, 1)
 
 
-@njit(cache=True)
+@njit(cache=True, no_cfunc_wrapper=True)
 def _resized(a, n):
     out = np.empty((n,) + a.shape[1:], a.dtype)
     m = min(n, a.shape[0])
@@ -419,7 +419,7 @@ def _resized(a, n):
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, no_cfunc_wrapper=True)
 def _grow(cs, c, r):
     """cs with room for at least c members and r flat row entries (contents kept)."""
     if c <= cs.gid.shape[0] and r <= cs.nbr.shape[0]:
@@ -446,7 +446,7 @@ def _grow(cs, c, r):
 # and written only when the set is gathered, scattered and (rarely) extended.
 
 
-@njit(cache=True, inline="always", error_model="numpy", _nrt=False)
+@njit(cache=True, no_cfunc_wrapper=True, inline="always", error_model="numpy", _nrt=False)
 def _hermite(x0, x1, v0, v1, s, dt):
     """Cubic Hermite position and velocity at s ∈ [0, 1] through (x0, v0), (x1, v1)."""
     h00, h10, h01, h11, d00, d10, d11 = hermite_weights(s)
@@ -455,7 +455,7 @@ def _hermite(x0, x1, v0, v1, s, dt):
     return x, v
 
 
-@njit(cache=True, inline="always", error_model="numpy", _nrt=False)
+@njit(cache=True, no_cfunc_wrapper=True, inline="always", error_model="numpy", _nrt=False)
 def _set_path(cs, a, s, dt):
     """cur (P, V, W) of member a at s: free-flight path plus its deviation."""
     path, cur, dev = cs.path, cs.cur, cs.dev
@@ -466,7 +466,7 @@ def _set_path(cs, a, s, dt):
         cur[a, 6 + c] = (1.0 - s) * path[a, 6 + c] + s * path[a, 15 + c] + dev[a, 6 + c]
 
 
-@njit(cache=True, inline="always", error_model="numpy", _nrt=False)
+@njit(cache=True, no_cfunc_wrapper=True, inline="always", error_model="numpy", _nrt=False)
 def _position_of(cs, b, s, dt):
     """x of member b at s (that of _state_of): most pairs looked at are not in contact,
     and their velocities and spins are not needed (the inlined _hermite's unused
@@ -479,7 +479,7 @@ def _position_of(cs, b, s, dt):
             _hermite(p[b, 2], p[b, 11], p[b, 5], p[b, 14], s, dt)[0])
 
 
-@njit(cache=True, inline="always", error_model="numpy", _nrt=False)
+@njit(cache=True, no_cfunc_wrapper=True, inline="always", error_model="numpy", _nrt=False)
 def _state_of(cs, b, s, dt):
     """(x, v, ω) of member b at s: cur when active, else its free-flight path."""
     if cs.active[b] != 0:
@@ -501,7 +501,7 @@ def _state_of(cs, b, s, dt):
 # decrements in the innermost loops (flight/spheres.py).
 
 
-@njit(cache=True, inline="always", error_model="numpy", _nrt=False)
+@njit(cache=True, no_cfunc_wrapper=True, inline="always", error_model="numpy", _nrt=False)
 def _grain_force(a, cs, model, box, per, s, dt, h, update, blk):
     """Contact force and torque on active member a at sub-step position s (the one law,
     physics/contact_law.spring_dashpot; both grains of a pair compute exactly negated
@@ -595,7 +595,7 @@ def _grain_force(a, cs, model, box, per, s, dt, h, update, blk):
             cs.overlap_sum[a] += osum
 
 
-@njit(cache=True, inline="always", error_model="numpy", _nrt=False)
+@njit(cache=True, no_cfunc_wrapper=True, inline="always", error_model="numpy", _nrt=False)
 def _bed_force(a, cs, st, bc, s, dt, h, update):
     """Soft contact of active member a with the bed spheres it touches at sub-step s, added
     to its force and torque (module docstring, "The bed in the contact phase").
@@ -736,7 +736,7 @@ def _bed_force(a, cs, st, bc, s, dt, h, update):
         cs.in_bed[a] = 1 if nb > 0 else 0
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, no_cfunc_wrapper=True, parallel=True)
 def _reach(x0w, pos, vel, dt, cl, ph):
     """D (reach of the free-flight path from x₀) per grain; returns the largest
     displacement bound from the list's reference positions."""
@@ -769,7 +769,7 @@ def _reach(x0w, pos, vel, dt, cl, ph):
 
 
 
-@njit(cache=True)
+@njit(cache=True, no_cfunc_wrapper=True)
 def _engage(x0w, pos, vel, dt, model, cl, ph, bc):
     """start[i]: when grain i joins the sub-steps (_engage_kernel); active[i] = 0. A grain
     that ends the step below the bed top will be moved by its (hard) bed rebound by up to
@@ -780,7 +780,7 @@ def _engage(x0w, pos, vel, dt, model, cl, ph, bc):
                    bc.last_contact, bc.ints[1], bc.params[0] != 0.0)
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, no_cfunc_wrapper=True, inline="always", error_model="numpy")
 def _first_bed(x0w, pos, vel, dt, i):
     """Lower bound on the step fraction s at which grain i's bottom can first go below the
     bed top (y < 1/2; inf: not in this step), by the bound of _chord on its cubic."""
@@ -795,7 +795,7 @@ def _first_bed(x0w, pos, vel, dt, i):
     return low / (y0 - y1) * (1.0 - TOUCH_EPS)
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, no_cfunc_wrapper=True, parallel=True)
 def _engage_kernel(x0w, pos, vel, dt, box, per, nbr, nbr_count, n_touch, in_bed, slot_id, margin, reach, d, active,
                    start, order, last_contact, step, packed):
     """Which grains are sub-stepped in this step, and from when: start[i] (step fraction
@@ -880,7 +880,7 @@ def _engage_kernel(x0w, pos, vel, dt, box, per, nbr, nbr_count, n_touch, in_bed,
             start[i] = tight
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, no_cfunc_wrapper=True, parallel=True)
 def _margins(x0w, pos, reach, margin):
     # the hard bed pass moves a grain only when it ends the step with its bottom below the
     # bed top (y < 1/2), by at most twice its reach (flight.spheres._bed_impact)
@@ -889,19 +889,19 @@ def _margins(x0w, pos, reach, margin):
 
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, no_cfunc_wrapper=True, inline="always")
 def _block_member(t, lo, hi, app):
     """The t-th member of a block: lo..hi-1 from the gather, then app.. (appended while it ran)."""
     return lo + t if lo + t < hi else app + (lo + t - hi)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, no_cfunc_wrapper=True, inline="always")
 def _block_size(cs, lo, hi, app):
     """Members of a block: lo..hi-1 and those appended from app (_block_member)."""
     return hi - lo + cs.n[0] - app
 
 
-@njit(cache=True, error_model="numpy", _nrt=False)
+@njit(cache=True, no_cfunc_wrapper=True, error_model="numpy", _nrt=False)
 def _forces(cs, st, bc, model, box, per, s, dt, h, lo, hi, app, blk, t0, t1):
     """Forces on the active members t0..t1-1 of block blk (_block_member) at s; returns
     how many touched a member that was not active (to be woken). At s = 0 (the set-up)
@@ -922,7 +922,7 @@ def _forces(cs, st, bc, model, box, per, s, dt, h, lo, hi, app, blk, t0, t1):
     return woke
 
 
-@njit(cache=True, error_model="numpy", _nrt=False)
+@njit(cache=True, no_cfunc_wrapper=True, error_model="numpy", _nrt=False)
 def _kick_drift(cs, model, s_next, dt, h, lo, hi, app, t0, t1):
     """First half of a sub-step for the active members t0..t1-1 of a block: half kick,
     drift (in member order: sequential memory). The forces at s_next follow (_forces),
@@ -944,7 +944,7 @@ def _kick_drift(cs, model, s_next, dt, h, lo, hi, app, t0, t1):
         _set_path(cs, a, s_next, dt)
 
 
-@njit(cache=True, error_model="numpy", _nrt=False)
+@njit(cache=True, no_cfunc_wrapper=True, error_model="numpy", _nrt=False)
 def _kick(cs, model, h, lo, hi, app, t0, t1):
     """Second half kick of a sub-step (the block's members t0..t1-1)."""
     inv_m = 1.0 / model.mass
@@ -959,7 +959,7 @@ def _kick(cs, model, h, lo, hi, app, t0, t1):
             dev[a, 6 + c] += 0.5 * h * ft[a, 3 + c] * inv_i
 
 
-@njit(cache=True, error_model="numpy", _nrt=False)
+@njit(cache=True, no_cfunc_wrapper=True, error_model="numpy", _nrt=False)
 def _activate(cs, a, s, dt):
     """Member a joins the sub-steps at s: zero deviation and force, on its free-flight path."""
     for c in range(9):
@@ -971,7 +971,7 @@ def _activate(cs, a, s, dt):
     cs.active[a] = 1
 
 
-@njit(cache=True, error_model="numpy", _nrt=False)
+@njit(cache=True, no_cfunc_wrapper=True, error_model="numpy", _nrt=False)
 def _join(cs, cand, ptr, end, before, s_now, dt):
     """Activate the candidates cand[ptr:end] (member indices by start) with start <
     ``before`` (start ≤ 0 when ``before`` is 0) at step fraction s_now. Returns the new
@@ -989,7 +989,7 @@ def _join(cs, cand, ptr, end, before, s_now, dt):
     return ptr, joined
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, no_cfunc_wrapper=True, inline="always")
 def _set_member(cs, a, g, x0w, pos, vel, spin, start, blk):
     """Member a is grain g of block blk: its free-flight path, nothing else yet."""
     cs.gid[a] = g
@@ -1010,7 +1010,7 @@ def _set_member(cs, a, g, x0w, pos, vel, spin, start, blk):
     cs.block[a] = blk
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, no_cfunc_wrapper=True, inline="always")
 def _set_row(cs, a, st, cl, bc, ph):
     """Member a's neighbour row (all its neighbours must be members), contact history and
     the state the sub-steps may change, copied in (room must exist)."""
@@ -1050,7 +1050,7 @@ def _set_row(cs, a, st, cl, bc, ph):
     cs.jump_c0[a] = st.jump_count[g]
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, no_cfunc_wrapper=True, inline="always", error_model="numpy")
 def _chord(x0i, x1i, u0i, u1i, x0j, x1j, u0j, u1j, box, per, dt):
     """Two grains' free-flight paths over the step (x0, u0 → x1, u1) as a chord plus a
     bulge. The Hermite path is H(s) = x₀ + sΔx + Δt[h₁₀(s)(u₀ − ū) + h₁₁(s)(u₁ − ū)] with
@@ -1073,7 +1073,7 @@ def _chord(x0i, x1i, u0i, u1i, x0j, x1j, u0j, u1j, box, per, dt):
     return r2, rd, dd, (4.0 / 27.0) * dt * (math.sqrt(w0) + math.sqrt(w1))
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, no_cfunc_wrapper=True, inline="always", error_model="numpy")
 def _path_gap(x0i, x1i, u0i, u1i, x0j, x1j, u0j, u1j, box, per, dt):
     """Lower bound on the distance between the free-flight paths of two grains over the
     step: the chord's closest approach less the bulge bound (_chord), less TOUCH_EPS (d)
@@ -1086,7 +1086,7 @@ def _path_gap(x0i, x1i, u0i, u1i, x0j, x1j, u0j, u1j, box, per, dt):
     return math.sqrt(closest) - bulge - TOUCH_EPS
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, no_cfunc_wrapper=True, inline="always", error_model="numpy")
 def _first_touch(x0i, x1i, u0i, u1i, x0j, x1j, u0j, u1j, box, per, dt, d):
     """Lower bound on the step fraction s at which two grains' free-flight paths can first
     come within d (inf: not in this step): the chord r₀ + sΔ first within d + B (_chord),
@@ -1104,14 +1104,14 @@ def _first_touch(x0i, x1i, u0i, u1i, x0j, x1j, u0j, u1j, box, per, dt, d):
     return c0 / (math.sqrt(disc) - rd) * (1.0 - TOUCH_EPS)  # the smaller root, cancellation-free
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, no_cfunc_wrapper=True, inline="always")
 def _member_gap(path, a, b, box, per, dt):
     """_path_gap of members a and b of a SubstepSet (``path``: its free-flight rows)."""
     return _path_gap(path[a, 0:3], path[a, 9:12], path[a, 3:6], path[a, 12:15], path[b, 0:3], path[b, 9:12],
                      path[b, 3:6], path[b, 12:15], box, per, dt)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, no_cfunc_wrapper=True, inline="always")
 def _root(parent, p):
     while parent[p] != p:
         parent[p] = parent[parent[p]]
@@ -1119,7 +1119,7 @@ def _root(parent, p):
     return p
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, no_cfunc_wrapper=True, inline="always")
 def _join_groups(parent, p, q):
     """Union of p's and q's groups in the forest ``parent``; the root stays the least index."""
     rp = _root(parent, p)
@@ -1130,7 +1130,7 @@ def _join_groups(parent, p, q):
         parent[rp] = rq
 
 
-@njit(cache=True)
+@njit(cache=True, no_cfunc_wrapper=True)
 def _group_pairs(x0w, pos, vel, cl, ph, gid, dt, forced, limits, tight):
     """Union–find over the members gid[0..m-1] (ph.loc[g]: their index): every member's
     list pairs with other members that come closer than d + 2σ on their free-flight paths
@@ -1165,7 +1165,7 @@ def _group_pairs(x0w, pos, vel, cl, ph, gid, dt, forced, limits, tight):
     return parent
 
 
-@njit(cache=True)
+@njit(cache=True, no_cfunc_wrapper=True)
 def _blocks(x0w, pos, vel, cl, ph, gid, dt, d, cap, forced):
     """Blocks of the members gid[0..m-1] (a grain id each, in cell order; ph.loc[g] their
     index): groups that stay out of touch with each other on paths deviating by less than
@@ -1223,7 +1223,7 @@ def _blocks(x0w, pos, vel, cl, ph, gid, dt, d, cap, forced):
     return new, blk, starts[:n_blocks + 1].copy()
 
 
-@njit(cache=True)
+@njit(cache=True, no_cfunc_wrapper=True)
 def _gather(x0w, st, cl, bc, ph, dt, d, blocked, forced, cs, filtered):
     """The SubstepSet of this phase: the candidates (start ≤ 1) with their rows and their
     list neighbours, numbered in the list's cell order, block by block ("Blocks"; one
@@ -1304,7 +1304,7 @@ def _gather(x0w, st, cl, bc, ph, dt, d, blocked, forced, cs, filtered):
     return cs, out, cstart, mstart, new
 
 
-@njit(cache=True)
+@njit(cache=True, no_cfunc_wrapper=True)
 def _near_pairs(cs, cand, box, per, dt, limit):
     """near[k] = 0 for the row entries of the candidates ``cand`` whose free-flight paths
     stay further apart than ``limit`` over the step (_path_gap) and that are not in
@@ -1323,7 +1323,7 @@ def _near_pairs(cs, cand, box, per, dt, limit):
         cs.nn[a] = m
 
 
-@njit(cache=True)
+@njit(cache=True, no_cfunc_wrapper=True)
 def _give_row(cs, a, x0w, st, cl, bc, ph):
     """A row for member a (a woken list neighbour): its neighbours that are not members
     yet are appended first, in a's block. Returns the (possibly grown) set."""
@@ -1341,7 +1341,7 @@ def _give_row(cs, a, x0w, st, cl, bc, ph):
     return cs
 
 
-@njit(cache=True)
+@njit(cache=True, no_cfunc_wrapper=True)
 def _wake_up(cs, x0w, st, bc, model, cl, ph, s, dt, h, lo, hi, app, blk):
     """Activate every member of block blk not active that an active one touches (its
     deviation is exactly zero until now) and give it its forces at this sub-step; repeat
@@ -1399,7 +1399,7 @@ def _wake_up(cs, x0w, st, bc, model, cl, ph, s, dt, h, lo, hi, app, blk):
 KICK_DRIFT, FORCES, KICK = 0, 1, 2  # the parts of a sub-step (_substep_part)
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, no_cfunc_wrapper=True, parallel=True)
 def _substep_part(part, cs, st, bc, model, box, per, s, dt, h, lo, hi, app, blk, lanes, woke):
     """One part of a sub-step of a large block (KICK_DRIFT, FORCES or KICK), its members
     cut into ``lanes`` contiguous ranges done in parallel. Every member's arithmetic is
@@ -1420,7 +1420,7 @@ def _substep_part(part, cs, st, bc, model, box, per, s, dt, h, lo, hi, app, blk,
     return woke[:lanes].sum() if part == FORCES else 0
 
 
-@njit(cache=True)
+@njit(cache=True, no_cfunc_wrapper=True)
 def _run_block(cs, cand, c0, c1, lo, hi, blk, x0w, st, bc, model, cl, ph, dt, n_sub, lanes):
     """All sub-steps of one block: members lo..hi-1, candidates cand[c0:c1]; members
     appended while it runs (woken grains' neighbours) belong to it. With ``lanes`` > 1
@@ -1474,7 +1474,7 @@ def _run_block(cs, cand, c0, c1, lo, hi, blk, x0w, st, bc, model, cl, ph, dt, n_
     return cs, done, woken
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, no_cfunc_wrapper=True, inline="always")
 def _group_of(cs, a, cell_of, forced, mstart):
     """A member (index in cell order) of member a's group; a member appended while its
     block ran (its group is not known) first joins every group of its block."""
@@ -1488,7 +1488,7 @@ def _group_of(cs, a, cell_of, forced, mstart):
     return p
 
 
-@njit(cache=True)
+@njit(cache=True, no_cfunc_wrapper=True)
 def _conflicts(cs, dt, d, box, per, forced, new, mstart):
     """The pairs of members that may have touched although their sub-steps did not look at
     each other: for every pair in an active member's row that is in another block
@@ -1529,7 +1529,7 @@ def _conflicts(cs, dt, d, box, per, forced, new, mstart):
     return n_bad, n_far
 
 
-@njit(cache=True)
+@njit(cache=True, no_cfunc_wrapper=True)
 def _release(cs, st, ph):
     """Undo a blocked pass that failed _conflicts: the grain arrays were not written, except
     the jump records of bed impacts and the set's membership marks."""
@@ -1541,7 +1541,7 @@ def _release(cs, st, ph):
             st.jump_count[g] = cs.jump_c0[a]
 
 
-@njit(cache=True)
+@njit(cache=True, no_cfunc_wrapper=True)
 def _scatter(cs, st, cl, bc, ph, skin_half):
     """End of the phase: what the sub-steps changed back into the grain arrays; for the
     grains that had a contact the deviations are added, and the fluid re-sampled and
@@ -1599,7 +1599,7 @@ def _scatter(cs, st, cl, bc, ph, skin_half):
     return over
 
 
-@njit(cache=True)
+@njit(cache=True, no_cfunc_wrapper=True)
 def _with_skin(cl, skin):
     """The ContactList with a larger skin (cells unchanged: they must be wide enough)."""
     return ContactList(cl.grid, 1.0 + skin, skin, cl.cell_of, cl.cell_start,
@@ -1608,7 +1608,7 @@ def _with_skin(cl, skin):
 
 
 
-@njit(cache=True)
+@njit(cache=True, no_cfunc_wrapper=True)
 def soft_contact_phase(state, x0w, model, cl, phase, bed, t0, step, dt, n_sub, cs, threads=1):
     """Phase 2 of the module docstring for all grains: the free flight (x₀ in ``x0w``
     (N, 9) = w.x0, x₁ in ``state``, a GrainState; ``phase`` a ContactPhase, ``bed`` a
@@ -1716,7 +1716,7 @@ def soft_contact_phase(state, x0w, model, cl, phase, bed, t0, step, dt, n_sub, c
     return cl, cs
 
 
-@njit(cache=True)
+@njit(cache=True, no_cfunc_wrapper=True)
 def _missed_contacts(pos, cl):
     """Pairs closer than d at ``pos`` that are not in each other's neighbour list."""
     g = cl.grid
@@ -1749,7 +1749,7 @@ def _missed_contacts(pos, cl):
     return missed
 
 
-@njit(cache=True)
+@njit(cache=True, no_cfunc_wrapper=True)
 def hard_contact_phase(st, cl, restitution, friction, before):
     """Binary hard-sphere impulses at the end-of-flight positions, then the overlaps
     removed (contacts/pairs.py: hard_sphere_collisions, push_apart; no centre pushed below

@@ -13,9 +13,9 @@ Nothing depends on the helper: if it fails, is killed or is slower than expected
 step compiles whatever the cache lacks, as it always did. ``SALTATION_SERIAL_COMPILE=1``
 turns the helper off; it is also off on one CPU.
 
-Run as ``python -m saltation.engine.cold_start MODULE NAME SIGNATURE_FILE``, it is the
-helper: it compiles kernel NAME of MODULE for the pickled signature, which Numba saves in
-the cache.
+Run as ``python -m saltation.engine.cold_start JOBS_FILE``, it is the helper: it compiles
+each (module, kernel name, argument types) of the pickled list, in order, and Numba saves
+each in the cache.
 """
 from __future__ import annotations
 
@@ -47,10 +47,9 @@ def helper_wanted() -> bool:
     return (os.cpu_count() or 1) >= 2 and os.environ.get("SALTATION_SERIAL_COMPILE", "") in ("", "0")
 
 
-def compile_elsewhere(dispatcher, sig) -> subprocess.Popen | None:
-    """Start a helper process that compiles ``dispatcher`` for ``sig`` into the shared cache;
-    None when it cannot be started."""
-    fn = dispatcher.py_func
+def compile_elsewhere(jobs: list) -> subprocess.Popen | None:
+    """Start a helper process that compiles each (kernel, argument types) of ``jobs``, in
+    order, into the shared cache; None when it cannot be started."""
     root = str(Path(__file__).resolve().parents[2])  # the folder holding the saltation package
     env = dict(os.environ)  # NUMBA_CACHE_DIR too: the helper's cache is this process's (flowfields/_numba_cache)
     env["PYTHONPATH"] = os.pathsep.join([root] + ([env["PYTHONPATH"]] if env.get("PYTHONPATH") else []))
@@ -58,8 +57,8 @@ def compile_elsewhere(dispatcher, sig) -> subprocess.Popen | None:
     try:
         fd, path = tempfile.mkstemp(prefix="saltation-sig-", suffix=".pkl")
         with os.fdopen(fd, "wb") as f:
-            pickle.dump(sig, f)
-        return subprocess.Popen([sys.executable, "-m", __name__, fn.__module__, fn.__name__, path], env=env,
+            pickle.dump([(k.py_func.__module__, k.py_func.__name__, sig) for k, sig in jobs], f)
+        return subprocess.Popen([sys.executable, "-m", __name__, path], env=env,
                                 stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     except Exception:  # noqa: BLE001  (no helper: this process compiles it)
         if path is not None:
@@ -100,15 +99,16 @@ def typed(*values) -> tuple:
 
 def compile_split(step, step_args: tuple, jobs) -> None:
     """Unless ``step`` (a kernel) is cached for ``step_args``, or the helper is not wanted:
-    ``jobs()`` gives (elsewhere, here); compile ``elsewhere`` = (kernel, argument types) in a
-    helper process and each (kernel, argument types) of ``here`` in this one, then wait for
-    the helper. Those must be the types the step calls them with, or the step compiles them
-    again (slower, not wrong). ``jobs`` is called only then (making the types may call a
-    small kernel)."""
+    ``jobs()`` gives (elsewhere, here), two lists of (kernel, argument types); compile those
+    of ``elsewhere`` in a helper process and those of ``here`` in this one, each list in
+    order, then wait for the helper. The two lists should share no callee (one of the two
+    processes would compile it again: slower, not wrong), and the types must be those the
+    step calls each kernel with (or the step compiles it again). ``jobs`` is called only
+    then (making the types may call a small kernel)."""
     if not helper_wanted() or is_cached(step, typed(*step_args)):
         return
     elsewhere, here = jobs()
-    helper = compile_elsewhere(*elsewhere)
+    helper = compile_elsewhere(elsewhere)
     compiled = False
     try:
         for kernel, sig in here:
@@ -119,10 +119,11 @@ def compile_split(step, step_args: tuple, jobs) -> None:
 
 
 def main(argv: list[str]) -> int:
-    module, name, path = argv
+    (path,) = argv
     with open(path, "rb") as f:
-        sig = pickle.load(f)
-    getattr(importlib.import_module(module), name).compile(sig)
+        jobs = pickle.load(f)
+    for module, name, sig in jobs:
+        getattr(importlib.import_module(module), name).compile(sig)
     return 0
 
 

@@ -297,20 +297,20 @@ class ClusterSimulation(Simulation):
         return self._advance_composites(f, st, ws, int(self.case.run.seed), t0, n)
 
     def _precompile(self, f, st, ws) -> None:
-        """A first run on two cores (engine/cold_start.py): with contacts, the contact phase
-        is compiled in a helper process while this one compiles the free flight and then the
-        contact phase's last kernel (``_finish``), which the helper reaches last and then
-        loads from the cache (the helper's tree is the larger one)."""
+        """A first run on two cores (engine/cold_start.py): with contacts, a helper process
+        compiles the contact phase's sub-step kernels while this one compiles the free
+        flight and the contact phase's set-up (contacts/composites.compile_jobs: two halves
+        of about the same size); the first step then compiles contact_phase and the step's
+        own bodies and loads the rest."""
         if self.cc is None:
             return
         seed, t0, typed = int(self.case.run.seed), 0.0, cold_start.typed
 
         def jobs():
-            elsewhere = (cluster_contacts.contact_phase, typed(st, ws, self.cc, self.dt, self.n_sub, self.pb))
-            here = [(clusters.free_flight_pass, typed(f, self.coef, self.bed, seed, st, ws, self.hist_coef, t0,
-                                                      self.dt, self.top_d)),
-                    (cluster_contacts._finish, typed(*cluster_contacts._refs(st, ws, self.cc)))]
-            return elsewhere, here
+            setup, substeps = cluster_contacts.compile_jobs(st, ws, self.cc, self.dt, self.n_sub, self.pb)
+            flight = (clusters.free_flight_pass, typed(f, self.coef, self.bed, seed, st, ws, self.hist_coef, t0,
+                                                       self.dt, self.top_d))
+            return substeps, setup + [flight]
 
         cold_start.compile_split(cluster_contacts.advance_clusters_contacts,
                                  self._contact_step_args(f, st, ws, seed, t0, 0), jobs)

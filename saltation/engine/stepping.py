@@ -62,14 +62,14 @@ LIST_HEIGHT = (4.0, 60.0)  # d: bounds of the contact grid's height (grains abov
 __all__ = ["Stepper", "advance_split", "default_skin"]
 
 
-@njit(cache=True)
+@njit(cache=True, no_cfunc_wrapper=True)
 def _clock():
     with objmode(t="float64"):
         t = time.perf_counter()
     return t
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, no_cfunc_wrapper=True, parallel=True)
 def _free_flight(f, coef, st, w, hc, t, dt):
     n = st.pos.shape[0]
     # one pointer each into the loop, a tuple again per chunk for the hot loop (grains/refs.py)
@@ -105,7 +105,7 @@ class PackedBedPass(NamedTuple):
     unused: int = 0  # (a Numba tuple needs a field)
 
 
-@njit(cache=True, error_model="numpy", _nrt=False)
+@njit(cache=True, no_cfunc_wrapper=True, error_model="numpy", _nrt=False)
 def _bed_range(st, w, lo, hi, t, dt, step, bed, virtual, packed, pb, last_contact, top, skip, use_skip):
     """The bed for grains lo..hi-1 (one call per chunk: flight.spheres.CHUNK); one of
     ``virtual`` (VirtualBed) and ``packed`` (PackedBedPass) is given, the other None."""
@@ -121,7 +121,7 @@ def _bed_range(st, w, lo, hi, t, dt, step, bed, virtual, packed, pb, last_contac
             st.above_top[p] += 1
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, no_cfunc_wrapper=True, parallel=True)
 def _bed_pass(st, w, t, dt, step, bed, virtual, packed, pb, last_contact, top, skip):
     """The bed for every grain not in ``skip`` (grains whose bed contact the soft contact
     phase resolved; ``skip`` empty: none)."""
@@ -133,7 +133,7 @@ def _bed_pass(st, w, t, dt, step, bed, virtual, packed, pb, last_contact, top, s
                    step, bed, virtual, packed, pb, last_contact, top, skip, use_skip)
 
 
-@njit(cache=True)
+@njit(cache=True, no_cfunc_wrapper=True)
 def advance_split(f, coef, bed, virtual, packed, st, w, hc, t0, dt, n_steps, top, step0, soft, hard, model, cl, ph,
                   bc, scratch, pb, last_contact, timers):
     """Advance all grains n_steps from t0 (global step index step0): free flight →
@@ -271,8 +271,8 @@ class Stepper:
         soft, typed = args[13], cold_start.typed
 
         def jobs():
-            elsewhere = (soft_contact_phase, typed(st, ws.x0, self.model, self.cl, self.ph, self.bc, 0.0, 0, self.dt,
-                                                   soft.n_sub, empty_substep_set(), soft.threads))
+            elsewhere = [(soft_contact_phase, typed(st, ws.x0, self.model, self.cl, self.ph, self.bc, 0.0, 0, self.dt,
+                                                    soft.n_sub, empty_substep_set(), soft.threads))]
             here = [(_free_flight, typed(f, self.coef, st, ws, self.hist_coef, 0.0, self.dt)),
                     (_bed_pass, typed(st, ws, 0.0, self.dt, 0, self.bed, self.virtual, self.packed, self.pb,
                                       self.last_contact, self.top_d, self.ph.active))]

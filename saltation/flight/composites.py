@@ -323,7 +323,7 @@ def world_centres(st: ClusterState, p: int) -> np.ndarray:
 
 
 # --------------------------------------------------------------------- small kernels
-@njit(cache=True, _nrt=False)
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False)
 def _quat_to_matrix(w, x, y, z, m):
     m[0, 0] = 1.0 - 2.0 * (y * y + z * z)
     m[0, 1] = 2.0 * (x * y - w * z)
@@ -336,7 +336,7 @@ def _quat_to_matrix(w, x, y, z, m):
     m[2, 2] = 1.0 - 2.0 * (x * x + y * y)
 
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False)
 def _rotate_quat(x, o, h):
     """q ← exp(h Ω/2 as a rotation vector) ⊗ q for q = x[6:10], Ω = o (world), exact."""
     ang = h * math.sqrt(o[0] * o[0] + o[1] * o[1] + o[2] * o[2])
@@ -352,7 +352,7 @@ def _rotate_quat(x, o, h):
     x[9] = a0 * z + a1 * y - a2 * xx + a3 * w
 
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False)
 def _solve6(aug, out):
     """Gaussian elimination with partial pivoting on the augmented (6, 7) matrix."""
     for c in range(6):
@@ -380,18 +380,21 @@ def _solve6(aug, out):
         out[c] = s / aug[c, c]
 
 
-@njit(cache=True, _nrt=False, error_model="numpy")
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False, error_model="numpy")
 def _sample_component(f, re_star, x, y, z, t, radius, with_lift, uf, grad, dudt, vort, uf_top, uf_bot):
-    # physics.fluid.fluid_at_grain with the component's own radius for the lift heights
+    # physics.fluid.fluid_at_grain with the component's own radius for the lift heights;
+    # the gradient is always sampled (the rotational drag needs the vorticity). The flag
+    # is passed as a run-time bool (np.bool_), as spheres pass theirs: a default or a
+    # literal True would be another signature, and the sampler would compile twice
     xp = x * re_star
     yp = y * re_star
     zp = z * re_star
     tp = t * re_star
     if with_lift:
         status = sample_column(f, xp, yp, zp, tp, (y + radius) * re_star, (y - radius) * re_star,
-                               uf, grad, dudt, uf_top, uf_bot)
+                               uf, grad, dudt, uf_top, uf_bot, np.bool_(True))
     else:
-        status = sample_point(f, xp, yp, zp, tp, uf, grad, dudt)
+        status = sample_point(f, xp, yp, zp, tp, uf, grad, dudt, np.bool_(True))
     for i in range(3):
         dudt[i] *= re_star
         for j in range(3):
@@ -400,7 +403,7 @@ def _sample_component(f, re_star, x, y, z, t, radius, with_lift, uf, grad, dudt,
     return 1 if status == ABOVE_TOP else 0
 
 
-@njit(cache=True, _nrt=False, error_model="numpy")
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False, error_model="numpy")
 def _sample_grain(f, coef, st, w, p, x, t):
     """Fluid at every component of grain p for the stage state x; fills w.rw."""
     rot = w.rot[p]
@@ -416,7 +419,7 @@ def _sample_grain(f, coef, st, w, p, x, t):
     return above
 
 
-@njit(cache=True, _nrt=False, error_model="numpy")
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False, error_model="numpy")
 def wake_factor(a, b, k, rw, d, r0, r1, r2, ur, amp, length):
     """Drag factor of component k of the grain whose components are a..b-1: the
     product over the components j upstream of k (the fluid, moving at −u_r relative to
@@ -449,7 +452,7 @@ def wake_factor(a, b, k, rw, d, r0, r1, r2, ur, amp, length):
     return out
 
 
-@njit(cache=True, _nrt=False, error_model="numpy")
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False, error_model="numpy")
 def _rhs(coef, st, w, p, x, kout, with_basset):
     """Stage derivative kout (13) of grain p at state x; fluid already sampled there."""
     re_star = coef[RE_STAR]
@@ -549,7 +552,7 @@ def _rhs(coef, st, w, p, x, kout, with_basset):
     kout[9] = 0.5 * (oz * qw + ox * qy - oy * qx)
 
 
-@njit(cache=True, _nrt=False, error_model="numpy")
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False, error_model="numpy")
 def _accelerations(st, w, p, x, ft):
     """ft[0:6] = world force and torque → ft[18:24] = world (a, α) via the body-frame
     generalized mass (module docstring)."""
@@ -587,7 +590,7 @@ def _accelerations(st, w, p, x, ft):
         ft[21 + i] = rot[i, 0] * ft[15] + rot[i, 1] * ft[16] + rot[i, 2] * ft[17]
 
 
-@njit(cache=True, _nrt=False, error_model="numpy")
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False, error_model="numpy")
 def _basset_end_step(coef, st, w, hc, p, dt):
     """Implicit newest-sample closure of the history force for the rigid grain (module
     docstring); the fluid at the new positions is in w.uf. Updates vel, omega, history."""
@@ -667,7 +670,7 @@ def _basset_end_step(coef, st, w, hc, p, dt):
         st.hist_i[k, 2] += g0 * s2
 
 
-@njit(cache=True, _nrt=False, error_model="numpy")
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False, error_model="numpy")
 def _lowest(st, w, p, px, py, pz, q0, q1, q2, q3):
     """(lowest bottom elevation, its component) for the grain at (p·, q·)."""
     rot = w.rot[p]
@@ -683,7 +686,7 @@ def _lowest(st, w, p, px, py, pz, q0, q1, q2, q3):
     return best, kb
 
 
-@njit(cache=True, _nrt=False, error_model="numpy")
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False, error_model="numpy")
 def _impulse(st, p, rcx, rcy, rcz, n0, n1, n2, e, fr, iw):
     """Rigid-body impact at contact offset r_c with unit normal n (module docstring).
     iw: (3,3) world inverse inertia. Returns 1 if an impulse was applied."""
@@ -760,7 +763,7 @@ def _impulse(st, p, rcx, rcy, rcz, n0, n1, n2, e, fr, iw):
     return 1
 
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False)
 def _kinetic(st, p, iw):
     # rigid kinetic energy ½ m v² + ½ Ω·I Ω with I = iw⁻¹ (use L = I Ω via solve-free form)
     v = st.vel[p]
@@ -769,7 +772,7 @@ def _kinetic(st, p, iw):
     return ke + 0.5 * _omega_i_omega(st, p)
 
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False)
 def _omega_i_omega(st, p):
     q = st.quat[p]
     w, x, y, z = q[0], q[1], q[2], q[3]
@@ -792,7 +795,7 @@ def _omega_i_omega(st, p):
         + b2 * (i[2, 0] * b0 + i[2, 1] * b1 + i[2, 2] * b2)
 
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False)
 def _apply(st, p, j0, j1, j2, rcx, rcy, rcz, iw):
     m = st.mass[p]
     st.vel[p, 0] += j0 / m
@@ -806,7 +809,7 @@ def _apply(st, p, j0, j1, j2, rcx, rcy, rcz, iw):
     st.omega[p, 2] += iw[2, 0] * a0 + iw[2, 1] * a1 + iw[2, 2] * a2
 
 
-@njit(cache=True, _nrt=False, error_model="numpy")
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False, error_model="numpy")
 def _world_inverse_inertia(st, w, p, iw):
     # I_w⁻¹ = R I_b⁻¹ Rᵀ with R of the current orientation (w.rot[p] must hold it)
     rot = w.rot[p]
@@ -820,7 +823,7 @@ def _world_inverse_inertia(st, w, p, iw):
             iw[i, j] = s
 
 
-@njit(cache=True, _nrt=False, error_model="numpy")
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False, error_model="numpy")
 def _bed_impact(st, w, p, t, dt, y_old, y_new, bed, seed):
     """Rebound of grain p on the virtual bed at its lowest component (module docstring)."""
     frac = 1.0
@@ -883,7 +886,7 @@ def _bed_impact(st, w, p, t, dt, y_old, y_new, bed, seed):
         history_mark_impact(st.hist_meta[k])  # the next step takes the slip step (physics/history.py)
 
 
-@njit(cache=True, _nrt=False, error_model="numpy")
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False, error_model="numpy")
 def step_grain(f, coef, bed, seed, st, w, hc, p, t, dt):
     """One RK4 step of composite grain p from t to t + dt, with bed impacts."""
     with_basset = coef[ON_BASSET] != 0.0
@@ -974,7 +977,7 @@ def step_grain(f, coef, bed, seed, st, w, hc, p, t, dt):
 CHUNK = 16
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, no_cfunc_wrapper=True, inline="always")
 def chunk_range(c, n):
     """Grains lo..hi-1 of chunk c of n grains, as int64 whatever the prange index's type
     (int64 where the loop is typed, uint64 inside the parallel kernel): the per-grain
@@ -983,7 +986,7 @@ def chunk_range(c, n):
     return lo, min(n, lo + CHUNK)
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, no_cfunc_wrapper=True, parallel=True)
 def free_flight_pass(f, coef, bed, seed, st, w, hc, t, dt, top):
     """step_grain (RK4 + bed) for every grain that is OK, in parallel; counts the grains
     above the flow's top (``top``)."""
@@ -1000,7 +1003,7 @@ def free_flight_pass(f, coef, bed, seed, st, w, hc, t, dt, top):
                 above_top[p] += 1
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, no_cfunc_wrapper=True, error_model="numpy")
 def advance_clusters(f, coef, bed, seed, st, w, hc, t0, dt, n_steps, top):
     """Advance all composite grains n_steps from t0 (as tests/peers/sphere_advance.advance): stops early
     when a grain is not finite or a jump buffer is full; returns the steps done."""

@@ -153,7 +153,7 @@ def make_state(pos, vel, spin, t0, n_window, jump_capacity=16) -> GrainState:
 # make_state / make_workspace.
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, no_cfunc_wrapper=True, inline="always")
 def _rhs(coef, x, basset, uf, grad, dudt, vort, uf_top, uf_bot, acc, dspin, k):
     """Right-hand side at stage state x (9,) -> k (9,) with the fluid already sampled;
     basset: the history acceleration −P·I_n held over the step (zeros when off)."""
@@ -171,7 +171,7 @@ def _rhs(coef, x, basset, uf, grad, dudt, vort, uf_top, uf_bot, acc, dspin, k):
         k[6 + i] = dspin[i]
 
 
-@njit(cache=True, error_model="numpy", _nrt=False, inline="always")
+@njit(cache=True, no_cfunc_wrapper=True, error_model="numpy", _nrt=False, inline="always")
 def _stage_point(f, re_star, p0, v0, dp, dv, h, t):
     """RK4 stage state x0 + h·k (position p0 + h·dp, velocity v0 + h·dv) and where its
     position lies in the flow at time t: (velocity, physics.fluid.locate_grain result)."""
@@ -180,14 +180,14 @@ def _stage_point(f, re_star, p0, v0, dp, dv, h, t):
     return v, loc
 
 
-@njit(cache=True, error_model="numpy", _nrt=False, inline="always")
+@njit(cache=True, no_cfunc_wrapper=True, error_model="numpy", _nrt=False, inline="always")
 def _stage_acceleration(f, coef, loc, cell, v):
     """Weight and drag at a located stage point whose fluid cell is gathered."""
     u0, u1, u2 = grain_velocity(f, loc, cell)
     return weight_and_drag(coef, v[0], v[1], v[2], u0, u1, u2)
 
 
-@njit(cache=True, error_model="numpy", _nrt=False, inline="always")
+@njit(cache=True, no_cfunc_wrapper=True, error_model="numpy", _nrt=False, inline="always")
 def _weight_drag_flight(f, coef, st, w, p, t, dt):
     """``_free_flight_body`` when weight and drag are the only forces switched on (no lift,
     Magnus, added mass, fluid acceleration, Basset or spin law: the fluid velocity alone
@@ -247,7 +247,7 @@ def _weight_drag_flight(f, coef, st, w, p, t, dt):
     st.fresh[p] = 1
 
 
-@njit(cache=True, error_model="numpy", _nrt=False, inline="always")
+@njit(cache=True, no_cfunc_wrapper=True, error_model="numpy", _nrt=False, inline="always")
 def _free_flight_body(f, coef, st, w, hc, p, t, dt):
     """Steps 1-2 of the module docstring for particle p: RK4 from t to t + dt with the
     fluid forces, then the fluid sample at the new position and the history closure.
@@ -323,7 +323,7 @@ def _free_flight_body(f, coef, st, w, hc, p, t, dt):
         )
 
 
-@njit(cache=True, error_model="numpy", _nrt=False, inline="always")
+@njit(cache=True, no_cfunc_wrapper=True, error_model="numpy", _nrt=False, inline="always")
 def _bed_check_body(st, w, p, t, dt, bed, seed):
     """Step 3 of the module docstring for particle p after its move from ``w.x0[p]`` to
     ``st.pos[p]``: virtual-bed impact, grazing contact, highest point of the jump."""
@@ -352,14 +352,14 @@ def _bed_check_body(st, w, p, t, dt, bed, seed):
 CHUNK = 64
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, no_cfunc_wrapper=True, inline="always")
 def _weight_and_drag_only(coef):
     """True when weight and drag are the only forces switched on (``_weight_drag_flight``)."""
     return (coef[ON_LIFT] == 0.0 and coef[ON_BASSET] == 0.0 and coef[ON_MAGNUS] == 0.0
             and coef[ON_ADDED_MASS] == 0.0 and coef[ON_FLUID_ACC] == 0.0 and coef[ON_SPIN] == 0.0)
 
 
-@njit(cache=True, error_model="numpy", _nrt=False)
+@njit(cache=True, no_cfunc_wrapper=True, error_model="numpy", _nrt=False)
 def weight_drag_particles(f, coef, st, w, lo, hi, t, dt):
     """``_weight_drag_flight`` for grains lo..hi-1 that are OK (one compiled function for
     both callers: the body is large and inlining it twice doubled the compile time)."""
@@ -368,7 +368,7 @@ def weight_drag_particles(f, coef, st, w, lo, hi, t, dt):
             _weight_drag_flight(f, coef, st, w, p, t, dt)
 
 
-@njit(cache=True, error_model="numpy", _nrt=False)
+@njit(cache=True, no_cfunc_wrapper=True, error_model="numpy", _nrt=False)
 def free_flight_particles(f, coef, st, w, hc, lo, hi, t, dt):
     """Steps 1-2 of the module docstring (``_free_flight_body``) for grains lo..hi-1 that are OK."""
     if _weight_and_drag_only(coef):
@@ -379,7 +379,7 @@ def free_flight_particles(f, coef, st, w, hc, lo, hi, t, dt):
             _free_flight_body(f, coef, st, w, hc, p, t, dt)
 
 
-@njit(cache=True, error_model="numpy", _nrt=False)
+@njit(cache=True, no_cfunc_wrapper=True, error_model="numpy", _nrt=False)
 def _bed_impact(st, w, p, t, dt, y_old, y_new, bed, seed):
     """Rebound on the virtual rough bed; close the jump; reset the history."""
     frac = 1.0

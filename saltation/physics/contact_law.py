@@ -28,7 +28,7 @@ import math
 from numba import njit
 
 
-@njit(cache=True, inline="always", error_model="numpy", _nrt=False)
+@njit(cache=True, no_cfunc_wrapper=True, inline="always", error_model="numpy", _nrt=False)
 def spring_dashpot(n0, n1, n2, overlap, vr0, vr1, vr2, sh0, sh1, sh2, h, update, kn, kt, c_n, c_t, mu):
     """Contact force of the law above for unit normal n, overlap δ > 0, contact-point
     relative velocity vr and tangential spring ξ = sh (module docstring)."""
@@ -71,7 +71,7 @@ def spring_dashpot(n0, n1, n2, overlap, vr0, vr1, vr2, sh0, sh1, sh2, h, update,
     return fn, ft0, ft1, ft2, sh0, sh1, sh2
 
 
-@njit(cache=True, inline="always", error_model="numpy", _nrt=False)
+@njit(cache=True, no_cfunc_wrapper=True, inline="always", error_model="numpy", _nrt=False)
 def sphere_contact_velocity(n0, n1, n2, arm, dv0, dv1, dv2, ws0, ws1, ws2):
     """Relative velocity of the contact point of sphere i against sphere j (or a fixed
     bed sphere): dv − arm (ω_i + ω_j) × n, with dv = v_i − v_j, ws = ω_i + ω_j, n from j
@@ -82,7 +82,7 @@ def sphere_contact_velocity(n0, n1, n2, arm, dv0, dv1, dv2, ws0, ws1, ws2):
     return dv0 - (w1 * n2 - w2 * n1), dv1 - (w2 * n0 - w0 * n2), dv2 - (w0 * n1 - w1 * n0)
 
 
-@njit(cache=True, inline="always", error_model="numpy", _nrt=False)
+@njit(cache=True, no_cfunc_wrapper=True, inline="always", error_model="numpy", _nrt=False)
 def lever_torque(n0, n1, n2, arm, f0, f1, f2):
     """arm n × F: the torque on sphere i is minus this (contact point −arm n from its centre)."""
     return arm * (n1 * f2 - n2 * f1), arm * (n2 * f0 - n0 * f2), arm * (n0 * f1 - n1 * f0)

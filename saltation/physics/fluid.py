@@ -23,7 +23,7 @@ from flowfields.sampler import (
 )
 
 
-@njit(cache=True, error_model="numpy", _nrt=False)
+@njit(cache=True, no_cfunc_wrapper=True, error_model="numpy", _nrt=False)
 def fluid_at_grain(f, re_star, x, y, z, t, with_lift, uf, grad, dudt, vort, uf_top, uf_bot, with_gradient=True):
     """Fluid velocity, gradient, ∂u/∂t and vorticity at the grain centre, and (with_lift)
     the fluid velocity at its top and bottom (y ± 1/2, zero below the bed; SPEC §2 lift).
@@ -52,7 +52,7 @@ def fluid_at_grain(f, re_star, x, y, z, t, with_lift, uf, grad, dudt, vort, uf_t
     return 1 if status == ABOVE_TOP else 0
 
 
-@njit(cache=True, error_model="numpy", _nrt=False)
+@njit(cache=True, no_cfunc_wrapper=True, error_model="numpy", _nrt=False)
 def locate_grain(f, re_star, x, y, z, t):
     """Where a grain centre (particle units) lies in the flow data (a compiled call, not
     inlined: inlined with ``gather_at`` and ``grain_velocity`` at every RK4 stage of
@@ -66,19 +66,19 @@ def locate_grain(f, re_star, x, y, z, t):
     return i0, i1, wx, j0, j1, wy, k0, k1, wz, n0, n1, wt, status == BELOW_WALL, sublayer, yp
 
 
-@njit(cache=True, error_model="numpy", _nrt=False)
+@njit(cache=True, no_cfunc_wrapper=True, error_model="numpy", _nrt=False)
 def gather_at(f, loc):
     """The gathered cell (sampler.gather_cell) of a ``locate_grain`` result."""
     return gather_cell(f, loc[9], loc[10], loc[11], loc[0], loc[1], loc[3], loc[4], loc[6], loc[7])
 
 
-@njit(cache=True, error_model="numpy", _nrt=False, inline="always")
+@njit(cache=True, no_cfunc_wrapper=True, error_model="numpy", _nrt=False, inline="always")
 def same_cell(a, b):
     """Two ``locate_grain`` results at the same time share their gathered cell."""
     return a[0] == b[0] and a[3] == b[3] and a[6] == b[6]
 
 
-@njit(cache=True, error_model="numpy", _nrt=False)
+@njit(cache=True, no_cfunc_wrapper=True, error_model="numpy", _nrt=False)
 def grain_velocity(f, loc, nodes):
     """Fluid velocity (u*) at a located grain centre from its gathered cell; zero below
     the bed top (as ``fluid_at_grain``)."""

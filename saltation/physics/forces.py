@@ -131,7 +131,7 @@ def make_coefficients(*, tau_star, R=1.65, Rp=None, re_star=None, slope=0.0,
 
 
 # ---------------------------------------------------------------- drag law
-@njit(cache=True, _nrt=False)
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False)
 def yen_drag_coefficient(re_p):
     """Yen (1992) sphere drag coefficient:
     C_D = 24/Re (1 + 0.15√Re + 0.017 Re) - 0.208/(1 + 10⁴ Re^-1/2).
@@ -141,7 +141,7 @@ def yen_drag_coefficient(re_p):
     return 24.0 / re * (1.0 + 0.15 * sre + 0.017 * re) - 0.208 / (1.0 + 1.0e4 / sre)
 
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False)
 def drag_factor(slip_speed, re_star):
     """C_D(Re_p)·U_r with Re_p = U_r Re*, written without the 1/U_r singularity:
     (24/Re*)(1 + 0.15√Re_p + 0.017 Re_p) - 0.208 U_r √Re_p/(√Re_p + 10⁴).
@@ -153,14 +153,14 @@ def drag_factor(slip_speed, re_star):
 
 
 # ---------------------------------------------------------------- the terms
-@njit(cache=True, _nrt=False, inline="always")
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False, inline="always")
 def weight_components(coef):
     """(α/τ*) sin θ and (α/τ*) cos θ: a_sw = (α/τ*)(sin θ, -cos θ, 0)."""
     g = coef[ALPHA] / coef[TAU_STAR]
     return g * coef[SIN_SLOPE], g * coef[COS_SLOPE]
 
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False)
 def _add_weight(coef, out):
     # a_sw = (α/τ*)(sin θ, -cos θ, 0)
     if coef[ON_WEIGHT] == 0.0:
@@ -170,14 +170,14 @@ def _add_weight(coef, out):
     out[1] -= gy
 
 
-@njit(cache=True, _nrt=False, inline="always")
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False, inline="always")
 def drag_per_slip(r0, r1, r2, coef):
     """k of a_dr = k u_r with u_r = u_p - u_f = (r0, r1, r2): k = -(3/4) α C_D U_r."""
     ur = math.sqrt(r0 * r0 + r1 * r1 + r2 * r2)
     return -0.75 * coef[ALPHA] * drag_factor(ur, coef[RE_STAR])
 
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False)
 def _add_drag(up, uf, coef, out):
     # a_dr = -(3/4) α C_D U_r u_r
     if coef[ON_DRAG] == 0.0:
@@ -191,7 +191,7 @@ def _add_drag(up, uf, coef, out):
     out[2] += k * r2
 
 
-@njit(cache=True, _nrt=False, inline="always")
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False, inline="always")
 def weight_and_drag(coef, up0, up1, up2, uf0, uf1, uf2):
     """``fluid_acceleration`` when weight and drag are the only terms switched on, on
     scalars (flight/spheres.py's fast path): the same operations in the same order."""
@@ -213,7 +213,7 @@ def weight_and_drag(coef, up0, up1, up2, uf0, uf1, uf2):
     return a0, a1, a2
 
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False)
 def _add_lift(up, uf_top, uf_bot, coef, out):
     # a_lf,y = (3/4) α C_L (|u_p - u_f(y+1/2)|² - |u_p - u_f(y-1/2)|²)
     if coef[ON_LIFT] == 0.0:
@@ -229,7 +229,7 @@ def _add_lift(up, uf_top, uf_bot, coef, out):
     out[1] += 0.75 * coef[ALPHA] * coef[CL] * (top2 - bot2)
 
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False)
 def _add_magnus(up, uf, vort_f, spin_p, coef, out):
     # a_mg = (3/4) α C_Ω (ϖ_p - ½ ω_f) × u_r
     if coef[ON_MAGNUS] == 0.0:
@@ -246,7 +246,7 @@ def _add_magnus(up, uf, vort_f, spin_p, coef, out):
     out[2] += k * (s0 * r1 - s1 * r0)
 
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False)
 def _add_material_acceleration(dudt_f, grad_uf, v, k, out):
     # out += k (∂u_f/∂t + (v·∇) u_f),  (v·∇)u_i = Σ_j v_j ∂u_i/∂x_j
     for i in range(3):
@@ -254,7 +254,7 @@ def _add_material_acceleration(dudt_f, grad_uf, v, k, out):
                        + grad_uf[i, 2] * v[2])
 
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False)
 def _add_added_mass(up, grad_uf, dudt_f, coef, out):
     # a_am = α Cm (∂u_f/∂t + (u_p·∇) u_f): fluid acceleration along the grain path
     if coef[ON_ADDED_MASS] == 0.0:
@@ -262,7 +262,7 @@ def _add_added_mass(up, grad_uf, dudt_f, coef, out):
     _add_material_acceleration(dudt_f, grad_uf, up, coef[ALPHA] * coef[CM], out)
 
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False)
 def _add_fluid_acc(uf, grad_uf, dudt_f, coef, out):
     # a_fa = α (∂u_f/∂t + (u_f·∇) u_f): pressure gradient of the undisturbed flow
     if coef[ON_FLUID_ACC] == 0.0:
@@ -271,7 +271,7 @@ def _add_fluid_acc(uf, grad_uf, dudt_f, coef, out):
 
 
 # ---------------------------------------------------------------- public kernels
-@njit(cache=True, _nrt=False)
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False)
 def fluid_acceleration(up, uf, grad_uf, dudt_f, vort_f, spin_p, uf_top, uf_bot,
                        coef, out):
     """Sum of all switched-on non-history terms (weight, drag, lift, Magnus, added
@@ -287,7 +287,7 @@ def fluid_acceleration(up, uf, grad_uf, dudt_f, vort_f, spin_p, uf_top, uf_bot,
     _add_fluid_acc(uf, grad_uf, dudt_f, coef, out)
 
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False)
 def fluid_acceleration_terms(up, uf, grad_uf, dudt_f, vort_f, spin_p, uf_top, uf_bot,
                              coef, terms):
     """Each term separately: ``terms`` has shape (N_TERMS, 3), rows TERM_WEIGHT …

@@ -153,7 +153,7 @@ def basset_acceleration_prefactor(alpha, re_star):
 
 
 # ---------------------------------------------------------------- window weights
-@njit(cache=True, _nrt=False)
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False)
 def _window_weights(n_int, oldest_central, dt, gamma):
     """Weights γ_j on slip samples w_j = u_r(t - jΔt), j = 0 … n_int (+1 if
     ``oldest_central``), such that Σ γ_j w_j = ∫₀^{n_int Δt} g(t-s) s^(-1/2) ds
@@ -195,7 +195,7 @@ def _window_weights(n_int, oldest_central, dt, gamma):
             gamma[m - 2] -= 0.5 * b_old
 
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False)
 def _build_window_table(n_window, dt, table):
     # row k = number of stored samples since reset (k ≥ N_w + 2: full window)
     for k in range(n_window + 3):
@@ -205,7 +205,7 @@ def _build_window_table(n_window, dt, table):
             _window_weights(n_window, True, dt, table[k])
 
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False)
 def _phi1(x):
     # (1 - e^{-x}(1 + x))/x², with its series where the formula cancels
     if x < 1.0e-2:
@@ -213,7 +213,7 @@ def _phi1(x):
     return (1.0 - math.exp(-x) * (1.0 + x)) / (x * x)
 
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False)
 def _phi0(x):
     # (1 - e^{-x})/x
     if x < 1.0e-8:
@@ -284,7 +284,7 @@ def history_state_bytes(n_window=DEFAULT_WINDOW_STEPS):
 
 
 # ---------------------------------------------------------------- per-particle kernels
-@njit(cache=True, _nrt=False)
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False)
 def history_reset(slip0, slip_hist, meta, tail):
     """Start a new history whose first sample is ``slip0`` (bed impact, release).
     Arguments are one particle's slices: slip_hist[i], meta[i], tail[i]."""
@@ -299,7 +299,7 @@ def history_reset(slip0, slip_hist, meta, tail):
         meta[META_JUMPS + j] = -1
 
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False)
 def history_mark_impact(meta):
     """An impact or contact changed the grain's velocity impulsively: the next step takes
     the slip step into the history, or restarts it (``history_start_step``)."""
@@ -307,7 +307,7 @@ def history_mark_impact(meta):
         meta[META_COUNT] = -meta[META_COUNT]
 
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False)
 def _fold_jump(meta, tail, j, age, dt, tail_time, tail_weight):
     # slip step j, `age` steps old, into the tail modes: Δ √(e/tᵢ) exp(-age Δt/(2tᵢ));
     # returns what it adds to I (Σ aᵢ × that)
@@ -331,7 +331,7 @@ def _fold_jump(meta, tail, j, age, dt, tail_time, tail_weight):
     return s0, s1, s2
 
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False)
 def history_start_step(slip_now, slip_hist, meta, tail, i_hist, dt, keep, tail_time, tail_weight):
     """At the start of a step, before the history force is used: a fresh history at
     release (count 0) or, after an impact (count < 0), the slip step kept (``keep``) or
@@ -376,7 +376,7 @@ def history_start_step(slip_now, slip_hist, meta, tail, i_hist, dt, keep, tail_t
     tail[N_MODES + free, 2] = d2
 
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False)
 def jump_impulse(meta, tail, dt):
     # ∫ over the coming step of Σ Δ/√(t - t_c): Σ Δ · 2(√((a+1)Δt) - √(aΔt))
     q0 = 0.0
@@ -392,7 +392,7 @@ def jump_impulse(meta, tail, dt):
     return q0, q1, q2
 
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False)
 def age_jumps(meta, tail, dt, n_window, tail_time, tail_weight):
     # one step older; a window length old: into the tail. Returns what the folded steps
     # add to I at the new time
@@ -411,7 +411,7 @@ def age_jumps(meta, tail, dt, n_window, tail_time, tail_weight):
     return s0, s1, s2
 
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False)
 def _integral3(slip_hist, meta, tail, window_weights, tail_weight):
     length = slip_hist.shape[0]
     count = meta[META_COUNT]
@@ -437,7 +437,7 @@ def _integral3(slip_hist, meta, tail, window_weights, tail_weight):
     return s0, s1, s2
 
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False)
 def history_integral(slip_hist, meta, tail, window_weights, tail_weight, out):
     """I(t_n) = ∫₀^{t_n} (du_r/dτ)(t_n - τ)^(-1/2) dτ for one particle, where t_n
     is the time of its newest sample: window dot product + Σ aᵢ Fᵢ."""
@@ -447,7 +447,7 @@ def history_integral(slip_hist, meta, tail, window_weights, tail_weight, out):
     out[2] = s2
 
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False)
 def _advance(slip_hist, meta, tail, tail_decay, tail_c_old, tail_c_new):
     # open a new newest slot (returned): fold the interval leaving the window
     # into the tail modes first (O(m) work, no allocation)
@@ -489,7 +489,7 @@ def _advance(slip_hist, meta, tail, tail_decay, tail_c_old, tail_c_new):
     return head
 
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False)
 def history_push(slip_new, slip_hist, meta, tail, tail_decay, tail_c_old, tail_c_new):
     """Append the slip u_r(t_{n+1}) (one particle's slices).  Used when the
     history is recorded without the implicit step end (tests, diagnostics);
@@ -499,14 +499,14 @@ def history_push(slip_new, slip_hist, meta, tail, tail_decay, tail_c_old, tail_c
         slip_hist[head, c] = slip_new[c]
 
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False)
 def add_basset_acceleration(prefactor, i_start, out):
     """out += a_bs = -P I_n: the history term held over the RK4 stages."""
     for c in range(3):
         out[c] -= prefactor * i_start[c]
 
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False)
 def history_end_step(u, uf_new, i_start, prefactor, dt, slip_hist, meta, tail,
                      window_weights, tail_weight, tail_decay, tail_c_old, tail_c_new,
                      i_next, tail_time):
@@ -549,7 +549,7 @@ def history_end_step(u, uf_new, i_start, prefactor, dt, slip_hist, meta, tail,
 
 
 # ---------------------------------------------------------------- reference (tests)
-@njit(cache=True, _nrt=False)
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False)
 def _full_history(w, dt, gamma, out):
     n = w.shape[0] - 1
     _window_weights(n, False, dt, gamma)

@@ -17,7 +17,7 @@ This is not a cryptographic generator; it passes the usual statistical
 batteries (SplitMix64 passes BigCrush) and is more than adequate for contact
 angles and initial perturbations.
 
-All functions are ``@njit(cache=True)`` and take plain Python/NumPy integers
+All functions are ``@njit(cache=True, no_cfunc_wrapper=True)`` and take plain Python/NumPy integers
 (seed, particle, counter >= 0); they return float64.
 """
 
@@ -40,7 +40,7 @@ _DOMAIN_NORMAL = np.uint64(0xA4093822299F31D0)
 _TWO_M53 = 1.0 / 9007199254740992.0  # 2**-53
 
 
-@njit(cache=True, inline="always", _nrt=False)
+@njit(cache=True, no_cfunc_wrapper=True, inline="always", _nrt=False)
 def _mix64(z):
     """SplitMix64 finaliser: a bijective avalanche mix of a uint64."""
     z = (z ^ (z >> _S30)) * _M1
@@ -48,7 +48,7 @@ def _mix64(z):
     return z ^ (z >> _S31)
 
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False)
 def random_bits(seed, particle, counter, domain=0):
     """64 random bits, a function of (seed, particle, counter, domain) only."""
     z = _mix64(np.uint64(seed) + _GOLDEN)
@@ -58,19 +58,19 @@ def random_bits(seed, particle, counter, domain=0):
     return z
 
 
-@njit(cache=True, inline="always", _nrt=False)
+@njit(cache=True, no_cfunc_wrapper=True, inline="always", _nrt=False)
 def _bits_to_open_unit(z):
     # top 53 bits, shifted by half a unit: values in (0, 1), never 0 or 1
     return (np.float64(z >> _S11) + 0.5) * _TWO_M53
 
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False)
 def uniform(seed, particle, counter):
     """Uniform double in the open interval (0, 1)."""
     return _bits_to_open_unit(random_bits(seed, particle, counter, _DOMAIN_UNIFORM))
 
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False)
 def uniform2(seed, particle, counter):
     """Two independent uniforms in (0, 1) from one counter value (a tuple)."""
     z1 = random_bits(seed, particle, counter, _DOMAIN_UNIFORM2)
@@ -78,7 +78,7 @@ def uniform2(seed, particle, counter):
     return _bits_to_open_unit(z1), _bits_to_open_unit(z2)
 
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False)
 def normal(seed, particle, counter):
     """Standard normal variate (Box-Muller on two independent uniforms)."""
     z1 = random_bits(seed, particle, counter, _DOMAIN_NORMAL)

@@ -32,7 +32,7 @@ SPIN_TABLE_C = np.array([
 ])
 
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False)
 def _spin_row(re_r):
     if re_r < 1.0:
         return 0
@@ -45,7 +45,7 @@ def _spin_row(re_r):
     return 4
 
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False)
 def spin_coefficient(re_r):
     """Rotational drag coefficient C_ω(Re_r) (table of SPEC §2). Diverges as
     16π/Re_r at Re_r → 0; Re_r is floored at 1e-300 to stay finite."""
@@ -55,7 +55,7 @@ def spin_coefficient(re_r):
         + SPIN_TABLE_C[k, 2] * re
 
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False)
 def spin_rate(spin_p, vort_f, R, re_star, out):
     """dϖ_p/dt into ``out`` (length 3), particle units.
 
