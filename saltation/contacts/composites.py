@@ -1063,24 +1063,19 @@ def contact_phase(st, w, cc, dt, n_sub, pb):
 
 
 def compile_jobs(st, w, cc, dt, n_sub, pb):
-    """``contact_phase``'s kernel tree in two lists of (kernel, argument types), as
-    contact_phase calls them, with no callee in common, for a first run's compile on two
-    cores (engine/cold_start.py): (set-up: reach and neighbour list; sub-steps: poses,
+    """``contact_phase``'s kernel tree in two lists of (kernel, arguments as contact_phase
+    passes them), with no callee in common, for a first run's compile on two cores
+    (engine/cold_start.py): (set-up: reach and neighbour list; sub-steps: poses,
     engagement, forces, moves, kicks, ``_finish``). The engine compiles the set-up with
     the free flight in the run's process and the sub-steps in the helper: two halves of
     about the same compile time (``contact_phase`` itself is inlined into the step)."""
-    from numba import typeof
-
-    def typed(*values):
-        return tuple(typeof(v) for v in values)
-
     h = dt / n_sub
     sr, wr, cr = _refs(st, w, cc)
-    step = typed(sr, wr, cr, h, 0.5 * cc.par[4], 1.0, dt)
-    setup = [(_reach, typed(st, w, cc, dt)), (_build_list, typed(st, cc, pb))]
-    substeps = [(_poses, typed(st, w, cc, 0.0, dt)), (_engage, typed(st, w, cc)), (component_forces, typed(st, cc, h, 0.0)),
-                (_move_par, step), (_move_ser, step), (_force_kick_par, typed(sr, cr, h, 1.0)),
-                (_force_kick_ser, typed(sr, cr, h, 1.0)), (_finish, typed(sr, wr, cr))]
+    step = (sr, wr, cr, h, 0.5 * cc.par[4], 1.0, dt)
+    setup = [(_reach, (st, w, cc, dt)), (_build_list, (st, cc, pb))]
+    substeps = [(_poses, (st, w, cc, 0.0, dt)), (_engage, (st, w, cc)), (component_forces, (st, cc, h, 0.0)),
+                (_move_par, step), (_move_ser, step), (_force_kick_par, (sr, cr, h, 1.0)),
+                (_force_kick_ser, (sr, cr, h, 1.0)), (_finish, (sr, wr, cr))]
     return setup, substeps
 
 

@@ -300,17 +300,17 @@ class ClusterSimulation(Simulation):
         """A first run on two cores (engine/cold_start.py): with contacts, a helper process
         compiles the contact phase's sub-step kernels while this one compiles the free
         flight and the contact phase's set-up (contacts/composites.compile_jobs: two halves
-        of about the same size); the first step then compiles contact_phase and the step's
-        own bodies and loads the rest."""
+        of about the same size); the first step then compiles its own body (contact_phase
+        inlined) and loads the rest."""
         if self.cc is None:
             return
         seed, t0, typed = int(self.case.run.seed), 0.0, cold_start.typed
 
         def jobs():
             setup, substeps = cluster_contacts.compile_jobs(st, ws, self.cc, self.dt, self.n_sub, self.pb)
-            flight = (clusters.free_flight_pass, typed(f, self.coef, self.bed, seed, st, ws, self.hist_coef, t0,
-                                                       self.dt, self.top_d))
-            return substeps, setup + [flight]
+            flight = (clusters.free_flight_pass, (f, self.coef, self.bed, seed, st, ws, self.hist_coef, t0, self.dt,
+                                                  self.top_d))
+            return [(k, typed(*a)) for k, a in substeps], [(k, typed(*a)) for k, a in setup + [flight]]
 
         cold_start.compile_split(cluster_contacts.advance_clusters_contacts,
                                  self._contact_step_args(f, st, ws, seed, t0, 0), jobs)
