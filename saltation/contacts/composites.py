@@ -1064,11 +1064,13 @@ def contact_phase(st, w, cc, dt, n_sub, pb):
 
 def compile_jobs(st, w, cc, dt, n_sub, pb):
     """``contact_phase``'s kernel tree in two lists of (kernel, arguments as contact_phase
-    passes them), with no callee in common, for a first run's compile on two cores
-    (engine/cold_start.py): (set-up: reach and neighbour list; sub-steps: poses,
-    engagement, forces, moves, kicks, ``_finish``). The engine compiles the set-up with
-    the free flight in the run's process and the sub-steps in the helper: two halves of
-    about the same compile time (``contact_phase`` itself is inlined into the step)."""
+    passes them), for a first run's compile on two cores (engine/cold_start.py): (set-up:
+    reach and neighbour list; sub-steps: poses, engagement, forces, moves, kicks,
+    ``_finish``). The engine compiles the set-up with the free flight in the run's process
+    and the sub-steps in the helper: two halves of about the same compile time
+    (``contact_phase`` itself is inlined into the step). The halves share no listed kernel;
+    small leaves that both call (``cells.sort_points``, from ``_engage`` and
+    ``_build_list``) may be compiled by both processes (~0.5 s each)."""
     h = dt / n_sub
     sr, wr, cr = _refs(st, w, cc)
     step = (sr, wr, cr, h, 0.5 * cc.par[4], 1.0, dt)

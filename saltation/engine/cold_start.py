@@ -55,7 +55,7 @@ def compile_elsewhere(jobs: list) -> subprocess.Popen | None:
     env["PYTHONPATH"] = os.pathsep.join([root] + ([env["PYTHONPATH"]] if env.get("PYTHONPATH") else []))
     path = None
     try:
-        fd, path = tempfile.mkstemp(prefix="saltation-sig-", suffix=".pkl")
+        fd, path = tempfile.mkstemp(prefix="saltation-jobs-", suffix=".pkl")
         with os.fdopen(fd, "wb") as f:
             pickle.dump([(k.py_func.__module__, k.py_func.__name__, sig) for k, sig in jobs], f)
         return subprocess.Popen([sys.executable, "-m", __name__, path], env=env,
@@ -87,7 +87,7 @@ def finish(helper: subprocess.Popen | None, wait: bool = True) -> None:
         if helper.poll() is None:
             helper.kill()
             helper.wait()
-        _remove(helper.args[-1])  # the signature file
+        _remove(helper.args[-1])  # the jobs file
 
 
 def typed(*values) -> tuple:
