@@ -141,7 +141,7 @@ from .cells import axis_index, grid_shape, min_image, sort_points, stencil_cell
 from .path import hermite_weights
 
 __all__ = ["ClusterContacts", "compile_jobs", "make_cluster_contacts", "with_packed_bed", "contact_parameters", "substeps", "contact_phase",
-           "build_contact_list",
+           "build_contact_list", "as_refs", "contacts_of",
            "advance_clusters_contacts", "component_forces", "brute_force_pairs", "listed_pairs",
            "point_effective_masses", "DEFAULT_SKIN"]
 
@@ -211,11 +211,13 @@ class ClusterContacts(NamedTuple):
 ClusterContactsRefType, ClusterContactsRef = struct_ref(ClusterContacts, __name__)  # grains/refs.py
 
 
-# The parallel kernels take the three tuples as StructRefs (one pointer each, grains/refs.py)
-# and loop over chunks of grains (flight.composites.CHUNK); each chunk reads them as tuples
-# again (as_tuple), so that the per-grain functions below see tuples, as the hot loops must.
+# The contact phase's kernels take the three tuples as StructRefs (one pointer each,
+# grains/refs.py): the step makes them once and carries three pointers. The parallel ones
+# loop over chunks of grains (flight.composites.CHUNK); each chunk (and each serial kernel)
+# reads them as tuples again (as_tuple), so that the per-grain functions below see tuples,
+# as the hot loops must.
 @njit(cache=True, no_cfunc_wrapper=True)
-def _refs(st, w, cc):
+def as_refs(st, w, cc):
     """The three tuples as StructRefs over the same arrays (grains/refs.py)."""
     return ClusterStateRef(*st), ClusterWorkRef(*w), ClusterContactsRef(*cc)
 
@@ -314,12 +316,11 @@ def _qmul(a0, a1, a2, a3, b0, b1, b2, b3):
 
 # ----------------------------------------------------------------------------- engagement
 @njit(cache=True, no_cfunc_wrapper=True, parallel=True)
-def _reach(st, w, cc, dt):
+def _reach(sr, wr, cr, dt):
     """D_i (Hermite path bound) and the slerp angle φ_i of every grain; x1 saved.
     (Parallel bodies are separate functions: writes through a NamedTuple's attribute
     directly in a prange body can be lost.)"""
-    sr, wr, cr = _refs(st, w, cc)
-    n = st.pos.shape[0]
+    n = sr.pos.shape[0]
     for c in prange((n + CHUNK - 1) // CHUNK):
         sv, wv, cv = _views(sr, wr, cr)
         for p in range(*chunk_range(c, n)):
@@ -391,8 +392,11 @@ def _path_bottom(w, cc, p):
 
 
 @njit(cache=True, no_cfunc_wrapper=True)
-def _engage(st, w, cc):
-    """Mark the active grains (module docstring, step 2) and list them in cc.act."""
+def _engage(sr, wr, cr):
+    """Mark the active grains (module docstring, step 2) and list them in cc.act; forget
+    the partners and list rows of the others (they touch nothing) and start the active
+    ones' deviations at zero. Returns their number."""
+    st, w, cc = _views(sr, wr, cr)
     n = st.pos.shape[0]
     box = cc.par[5:8]
     skin = cc.par[4]
@@ -431,7 +435,24 @@ def _engage(st, w, cc):
         if cc.active[p]:
             cc.act[k] = p
             k += 1
+        else:
+            cc.n_partners[p] = 0
+            cc.in_bed[p] = 0
+            for a in range(st.cstart[p], st.cstart[p + 1]):
+                cc.nbr_count[a] = 0
     cc.n_act[0] = k
+    for q in range(k):
+        p = cc.act[q]
+        cc.touched[p] = 0
+        cc.bed_touch[p] = 0
+        for i in range(3):
+            cc.dx[p, i] = 0.0
+            cc.dv[p, i] = 0.0
+            cc.dL[p, i] = 0.0
+        cc.dq[p, 0] = 1.0
+        cc.dq[p, 1] = 0.0
+        cc.dq[p, 2] = 0.0
+        cc.dq[p, 3] = 0.0
     return k
 
 
@@ -522,10 +543,12 @@ def _transfer(comps, nbr, cnt, shear, nbr2, cnt2, shear2):
 
 
 @njit(cache=True, no_cfunc_wrapper=True)
-def _build_list(st, cc, pb):
+def _build_list(sr, cr, pb):
     """Neighbour list of the active grains' components at their current centres cc.cp
     (with a packed bed ``pb``, bed.packed.PackedBed, its spheres too; None: none),
-    history carried over; returns the ClusterContacts to use from now on."""
+    history carried over. The new list's arrays replace the old in ``cr`` (the old become
+    the spares for the next build)."""
+    st, cc = as_tuple(sr, ClusterState), as_tuple(cr, ClusterContacts)
     na = cc.n_act[0]
     m = 0
     for q in range(na):
@@ -582,12 +605,8 @@ def _build_list(st, cc, pb):
     cc.counters[LIST_BUILDS] += 1
     for q in range(na):
         cc.dev[cc.act[q]] = 0.0
-    return ClusterContacts(cc.par, cc.grain_of, cc.rho, cc.rnorm, nbr2, cnt2, shear2, spare_nbr, spare_cnt,
-                           spare_shear, cc.partners, cc.n_partners, cc.new_partners, cc.active, cc.act, cc.n_act,
-                           cc.touched, cc.reach, cc.phi, cc.x1, cc.dx, cc.dv, cc.dL, cc.dq, cc.dev, cc.P, cc.V,
-                           cc.Om, cc.dOm, cc.rot, cc.iw, cc.cp, cc.force, cc.torque, cc.collisions, cc.max_overlap,
-                           cc.overlap_sum, cc.contact_substeps, cc.counters, cc.bed_centres, cc.bed_par, cc.step_t,
-                           cc.step_index, cc.last_contact, cc.in_bed, cc.bed_touch)
+    cr.nbr, cr.nbr_count, cr.shear = nbr2, cnt2, shear2
+    cr.nbr2, cr.nbr_count2, cr.shear2 = spare_nbr, spare_cnt, spare_shear
 
 
 # ----------------------------------------------------------------------------- poses and forces
@@ -613,11 +632,10 @@ def _free_momentum(ib, f0, f1, f2, f3, o0, o1, o2):
 
 
 @njit(cache=True, no_cfunc_wrapper=True, parallel=True)
-def _poses(st, w, cc, s, dt):
+def _poses(sr, wr, cr, s, dt):
     """Pose of every active grain at σ = s on its free path plus deviation, its world
     inverse inertia and its components' world centres."""
-    sr, wr, cr = _refs(st, w, cc)
-    n = cc.n_act[0]
+    n = cr.n_act[0]
     for c in prange((n + CHUNK - 1) // CHUNK):
         sv, wv, cv = _views(sr, wr, cr)
         for q in range(*chunk_range(c, n)):
@@ -691,14 +709,13 @@ def _pose_one(st, w, cc, p, s, dt):
 
 
 @njit(cache=True, no_cfunc_wrapper=True, parallel=True)
-def component_forces(st, cc, h, sig):
+def component_forces(sr, cr, h, sig):
     """Contact force and torque on every active grain from its component contacts
     (module docstring) at the current poses (cc.P, cc.V, cc.Om, cc.cp); ``h`` the
     sub-step ξ advances by, ``sig`` the poses' position σ in the step: σ = 0 is the set-up
     evaluation (ξ not advanced, only held at the Coulomb limit as every soft contact does;
     the statistics untouched). Race-free: iteration p writes only grain p's rows."""
-    sr, cr = ClusterStateRef(*st), ClusterContactsRef(*cc)
-    n = cc.n_act[0]
+    n = cr.n_act[0]
     for c in prange((n + CHUNK - 1) // CHUNK):
         sv, cv = as_tuple(sr, ClusterState), as_tuple(cr, ClusterContacts)
         for q in range(*chunk_range(c, n)):
@@ -996,70 +1013,47 @@ def _finish_one(st, w, cc, p):
 
 
 @njit(cache=True, no_cfunc_wrapper=True, inline="always")  # inlined: one level less for the step to re-link (compile time)
-def build_contact_list(st, w, cc, dt, pb):
+def build_contact_list(sr, wr, cr, dt, pb):
     """Steps 2–3 set-up of the contact phase (module docstring): reach of every grain's
     free path from w.x0 (start) to the state st (end), active grains, their poses at
     σ = 0 and the component neighbour list (bed spheres of ``pb`` included; None: no
-    packed bed). Returns the ClusterContacts to use."""
-    n = st.pos.shape[0]
-    _reach(st, w, cc, dt)
-    na = _engage(st, w, cc)
-    # grains that are not active touch nothing: forget their partners and list rows
-    for p in range(n):
-        if cc.active[p] == 0:
-            cc.n_partners[p] = 0
-            cc.in_bed[p] = 0
-            for a in range(st.cstart[p], st.cstart[p + 1]):
-                cc.nbr_count[a] = 0
-    if na == 0:
-        return cc
-    for q in range(na):
-        p = cc.act[q]
-        cc.touched[p] = 0
-        cc.bed_touch[p] = 0
-        for i in range(3):
-            cc.dx[p, i] = 0.0
-            cc.dv[p, i] = 0.0
-            cc.dL[p, i] = 0.0
-        cc.dq[p, 0] = 1.0
-        cc.dq[p, 1] = 0.0
-        cc.dq[p, 2] = 0.0
-        cc.dq[p, 3] = 0.0
-    _poses(st, w, cc, 0.0, dt)
-    return _build_list(st, cc, pb)
+    packed bed), all written into ``cr``. Returns the number of active grains."""
+    _reach(sr, wr, cr, dt)
+    na = _engage(sr, wr, cr)
+    if na > 0:
+        _poses(sr, wr, cr, 0.0, dt)
+        _build_list(sr, cr, pb)
+    return na
 
 
 @njit(cache=True, no_cfunc_wrapper=True, inline="always")  # inlined: one level less for the step to re-link (compile time)
-def contact_phase(st, w, cc, dt, n_sub, pb):
+def contact_phase(sr, wr, cr, dt, n_sub, pb):
     """Grain–grain contacts (and, with a packed bed ``pb``, soft bed contacts; None: none)
     of one hydrodynamic step of length dt, after the free flight of every grain (module
-    docstring; cc.step_t and cc.step_index name the step); returns the ClusterContacts
-    to keep."""
-    cc = build_contact_list(st, w, cc, dt, pb)
-    na = cc.n_act[0]
+    docstring; cr.step_t and cr.step_index name the step). The state, work and contact
+    tuples come as StructRefs (grains/refs.py), so that the step carries three pointers,
+    not some ninety arrays (compile time); a list rebuild replaces arrays in ``cr``."""
+    na = build_contact_list(sr, wr, cr, dt, pb)
     if na == 0:
-        return cc
-    cc.counters[ENGAGED] += na
+        return
+    cr.counters[ENGAGED] += na
     h = dt / n_sub
-    half_skin = 0.5 * cc.par[4]
-    component_forces(st, cc, h, 0.0)
-    sr, wr, cr = _refs(st, w, cc)  # the sub-step kernels take one pointer each (grains/refs.py)
+    half_skin = 0.5 * cr.par[4]
+    component_forces(sr, cr, h, 0.0)
     par = na >= PARALLEL_FROM
     for s in range(n_sub):
         sig = (s + 1) / n_sub
         # half kick, drift, pose at σ (one pass); contact forces and the second half kick
         over = _move_par(sr, wr, cr, h, half_skin, sig, dt) if par else _move_ser(sr, wr, cr, h, half_skin, sig, dt)
         if over > 0:
-            cc.counters[OVERRUNS] += over
-            cc = _build_list(st, cc, pb)
-            cr = ClusterContactsRef(*cc)
+            cr.counters[OVERRUNS] += over
+            _build_list(sr, cr, pb)
         if par:
             _force_kick_par(sr, cr, h, sig)
         else:
             _force_kick_ser(sr, cr, h, sig)
-    cc.counters[SUBSTEPPED] += na * n_sub
+    cr.counters[SUBSTEPPED] += na * n_sub
     _finish(sr, wr, cr)
-    return cc
 
 
 def compile_jobs(st, w, cc, dt, n_sub, pb):
@@ -1072,13 +1066,19 @@ def compile_jobs(st, w, cc, dt, n_sub, pb):
     small leaves that both call (``cells.sort_points``, from ``_engage`` and
     ``_build_list``) may be compiled by both processes (~0.5 s each)."""
     h = dt / n_sub
-    sr, wr, cr = _refs(st, w, cc)
+    sr, wr, cr = as_refs(st, w, cc)
     step = (sr, wr, cr, h, 0.5 * cc.par[4], 1.0, dt)
-    setup = [(_reach, (st, w, cc, dt)), (_build_list, (st, cc, pb))]
-    substeps = [(_poses, (st, w, cc, 0.0, dt)), (_engage, (st, w, cc)), (component_forces, (st, cc, h, 0.0)),
+    setup = [(_reach, (sr, wr, cr, dt)), (_build_list, (sr, cr, pb))]
+    substeps = [(_poses, (sr, wr, cr, 0.0, dt)), (_engage, (sr, wr, cr)), (component_forces, (sr, cr, h, 0.0)),
                 (_move_par, step), (_move_ser, step), (_force_kick_par, (sr, cr, h, 1.0)),
                 (_force_kick_ser, (sr, cr, h, 1.0)), (_finish, (sr, wr, cr))]
     return setup, substeps
+
+
+@njit(cache=True, no_cfunc_wrapper=True)
+def contacts_of(cr):
+    """The ClusterContacts over a ClusterContactsRef's arrays (for Python callers)."""
+    return as_tuple(cr, ClusterContacts)
 
 
 # ----------------------------------------------------------------------------- run loop
@@ -1098,6 +1098,7 @@ def advance_clusters_contacts(f, coef, bed, seed, st, w, hc, t0, dt, n_steps, to
     n = st.pos.shape[0]
     cap = st.jump_buf.shape[1]
     k0 = round(t0 / dt)  # the global index of the first step (t0 is always k0 * dt)
+    sr, wr, cr = as_refs(st, w, cc)
     for s in range(n_steps):
         t = (k0 + s) * dt  # from the global step index: never from where a chunk began
         c0 = _clock()
@@ -1109,10 +1110,10 @@ def advance_clusters_contacts(f, coef, bed, seed, st, w, hc, t0, dt, n_steps, to
                 bad = True
                 break
         if not bad:
-            cc.step_t[0] = t
-            cc.step_t[1] = dt
-            cc.step_index[0] = k0 + s
-            cc = contact_phase(st, w, cc, dt, n_sub, pb)
+            cr.step_t[0] = t
+            cr.step_t[1] = dt
+            cr.step_index[0] = k0 + s
+            contact_phase(sr, wr, cr, dt, n_sub, pb)
         c2 = _clock()
         timers[0] += c1 - c0
         timers[1] += c2 - c1
@@ -1122,8 +1123,8 @@ def advance_clusters_contacts(f, coef, bed, seed, st, w, hc, t0, dt, n_steps, to
                 stop = True
                 break
         if stop:
-            return s + 1, cc
-    return n_steps, cc
+            return s + 1, as_tuple(cr, ClusterContacts)
+    return n_steps, as_tuple(cr, ClusterContacts)
 
 
 # ----------------------------------------------------------------------------- diagnostics
