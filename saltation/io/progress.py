@@ -26,11 +26,11 @@ def progress_bar(total: int, *, desc: str, enabled: bool, initial: int = 0):
 # Cold compile of a run's kernels with an empty cache on a 2-core machine,
 # `benchmarks/bench_compile.py` (its compile_s; part of the kernels in a helper process,
 # engine/cold_start.py): spheres 37-45 s on an Intel Rocket Lake (cases/default.toml: the
-# LES, soft contacts, virtual bed), composites 54 s there (the same with particle.shape =
-# "mixture"; 45-48 s after a sphere run, whose flow sampler they share). Not remeasured
+# LES, soft contacts, virtual bed), composites 45 s there (the same with particle.shape =
+# "mixture"; 37 s after a sphere run, whose flow sampler they share). Not remeasured
 # on the AMD EPYC of earlier figures, which compiled the old code ~1.7x slower than the
 # Rocket Lake (128 s against 62-73 s); the estimates allow for it.
-COMPILE_ESTIMATE_S = {"spheres": 70.0, "composites": 90.0}
+COMPILE_ESTIMATE_S = {"spheres": 70.0, "composites": 75.0}
 COMPILE_HEARTBEAT_S = 30.0  # a line this often while the compiler works
 
 
