@@ -369,6 +369,7 @@ class SubstepSet(NamedTuple):
     jump_c0: np.ndarray  # (C,) int64 copied in (restored if the phase is redone unblocked)
     nn: np.ndarray  # (C,) int64 near entries of the row, listed in nx[rs : rs + nn] ("Near pairs")
     nx: np.ndarray  # (R,) int64 flat indices of a row's near entries, in row order
+    at: np.ndarray  # (C, 3) every member's position at the sub-step being evaluated (_at)
 
 
 # The set travels between kernels as a StructRef (grains/refs.py), made and grown only in
@@ -393,6 +394,7 @@ def _make_set(c, r):
         np.empty((c, BED_SLOTS, 3)), np.empty((c, BED_SLOTS, 3)), np.empty(c, np.uint8), np.empty(c, np.int64),
         np.empty((c, 3)), np.empty(c, np.int64), np.empty(c), np.empty(c), np.empty(c), np.empty(c, np.int64),
         np.empty(c, np.int64), np.empty(c, np.int64), np.empty(c, np.int64), np.empty(r, np.int64),
+        np.empty((c, 3)),
     )
 
 
@@ -437,7 +439,7 @@ def _grow(cs, c, r):
         _resized(cs.slot_id, c), _resized(cs.slot_c, c), _resized(cs.slot_shear, c), _resized(cs.in_bed, c),
         _resized(cs.last_contact, c), _resized(cs.nrm, c), _resized(cs.impacts, c), _resized(cs.jump_t0, c),
         _resized(cs.jump_x0, c), _resized(cs.jump_ymax, c), _resized(cs.block, c), _resized(cs.jump_n0, c),
-        _resized(cs.jump_c0, c), _resized(cs.nn, c), _resized(cs.nx, r),
+        _resized(cs.jump_c0, c), _resized(cs.nn, c), _resized(cs.nx, r), _resized(cs.at, c),
     )
 
 
@@ -519,7 +521,7 @@ def _grain_force(a, cs, model, box, per, s, dt, h, update, blk):
     damp_n = meff * model.gamma_n
     damp_t = meff * model.gamma_t
     at_radius = model.lever == LEVER_RADIUS
-    cur, active, nbr, shear, touch, block, nx = cs.cur, cs.active, cs.nbr, cs.shear, cs.touch, cs.block, cs.nx
+    cur, active, nbr, shear, touch, block, nx, at = cs.cur, cs.active, cs.nbr, cs.shear, cs.touch, cs.block, cs.nx, cs.at
     fx = 0.0
     fy = 0.0
     fz = 0.0
@@ -539,7 +541,7 @@ def _grain_force(a, cs, model, box, per, s, dt, h, update, blk):
         rsq = d2
         delx = dely = delz = 0.0
         if block[b] == blk:
-            xj, yj, zj = _position_of(cs, b, s, dt)
+            xj, yj, zj = at[b, 0], at[b, 1], at[b, 2]
             delx = min_image(xi - xj, lx, px)
             dely = min_image(yi - yj, ly, py)
             delz = min_image(zi - zj, lz, pz)
@@ -933,6 +935,7 @@ def _kick_drift(cs, model, s_next, dt, h, lo, hi, app, t0, t1):
     for t in range(t0, t1):
         a = _block_member(t, lo, hi, app)
         if active[a] == 0:
+            _at(cs, a, s_next, dt)
             continue
         for c in range(3):
             dev[a, 3 + c] += 0.5 * h * ft[a, c] * inv_m
@@ -942,6 +945,25 @@ def _kick_drift(cs, model, s_next, dt, h, lo, hi, app, t0, t1):
         if dd > dev_max[a]:
             dev_max[a] = dd
         _set_path(cs, a, s_next, dt)
+        _at(cs, a, s_next, dt)
+
+
+@njit(cache=True, no_cfunc_wrapper=True, inline="always", error_model="numpy", _nrt=False)
+def _at(cs, a, s, dt):
+    """at[a] = member a's position at s (_position_of), computed once per member and
+    sub-step: the force loop reads it for every near pair instead of evaluating the
+    partner's path there."""
+    x, y, z = _position_of(cs, a, s, dt)
+    cs.at[a, 0] = x
+    cs.at[a, 1] = y
+    cs.at[a, 2] = z
+
+
+@njit(cache=True, no_cfunc_wrapper=True, error_model="numpy", _nrt=False)
+def _positions(cs, s, dt, lo, hi, app, t0, t1):
+    """at of the members t0..t1-1 of a block at s (_at)."""
+    for t in range(t0, t1):
+        _at(cs, _block_member(t, lo, hi, app), s, dt)
 
 
 @njit(cache=True, no_cfunc_wrapper=True, error_model="numpy", _nrt=False)
@@ -1379,6 +1401,7 @@ def _wake_up(cs, x0w, st, bc, model, cl, ph, s, dt, h, lo, hi, app, blk):
         first_round = False
         if q_new == q_hi:
             break
+        n_before = cs.n[0]
         for t in range(q_hi, q_new):
             b = cs.queue[t]
             if cs.has_row[b] == 0:
@@ -1386,6 +1409,9 @@ def _wake_up(cs, x0w, st, bc, model, cl, ph, s, dt, h, lo, hi, app, blk):
             cs.active[b] = 0
             _activate(as_tuple(cs, SubstepSet), b, s, dt)
         v, sv, bv = as_tuple(cs, SubstepSet), as_tuple(st, GrainState), as_tuple(bc, BedContext)
+        # the members just appended (woken grains' neighbours) have no position at s yet;
+        # the woken ones keep theirs (_activate puts them on their path at s, as _at did)
+        _positions(v, s, dt, n_before, v.n[0], v.n[0], np.int64(0), v.n[0] - n_before)
         for t in range(q_hi, q_new):
             # b alone (as members b..b and none appended): the compiled _forces, not a
             # second inlined copy of the force code (wake-ups are rare)
@@ -1441,6 +1467,7 @@ def _run_block(cs, cand, c0, c1, lo, hi, blk, x0w, st, bc, model, cl, ph, dt, n_
     # tangential springs (their state is that of the previous step's last sub-step)
     ptr, joined = _join(v, cand, c0, c1, 0.0, 0.0, dt)
     n_act += joined
+    _positions(v, 0.0, dt, lo, hi, app, first, _block_size(v, lo, hi, app))
     if _forces(v, sv, bv, model, box, per, 0.0, dt, h, lo, hi, app, blk, first, _block_size(v, lo, hi, app)) > 0:
         cs, k_w = _wake_up(cs, x0w, st, bc, model, cl, ph, 0.0, dt, h, lo, hi, app, blk)
         n_act += k_w
