@@ -124,7 +124,7 @@ the sub-steps cost O(grains sub-stepped), block by block ("Blocks"). Every membe
 position at the sub-step is worked out once, in the kick-drift pass (``at``: the active
 ones' current position, the others' point on their free-flight path), and the force loop
 reads it for each near pair: in the dense layer a grain has many near pairs, and
-evaluating the partner's path per pair cost ~12 % of the phase (3.94 %, one thread).
+evaluating the partner's path per pair cost ~10 % of the phase (3.94 %, one thread).
 
 Blocks (temporal blocking: cost per grain-sub-step independent of N)
 -------------------------------------------------------------------
