@@ -606,9 +606,14 @@ def main():
         print_estimate(sweep_estimate(rows, args.sweep))
         print(f"\n(saved {saved.get('date')}, command: {saved.get('command')})")
         return
+    import saltation
+
     t0 = time.perf_counter()
     start = {"date": time.strftime("%Y-%m-%d %H:%M:%S"), "load_avg": os.getloadavg(), "cpu_count": os.cpu_count(),
-             "command": " ".join(sys.argv)}
+             "command": " ".join(sys.argv),
+             # which code is measured: an editable install wins over this script's own tree
+             # unless PYTHONPATH names it
+             "saltation": str(Path(saltation.__file__).parent)}
     rows = []
     for c in args.concentrations:
         rows.append(run_one(c, args))
@@ -625,7 +630,7 @@ def main():
               "threads": args.threads, "concentrations": rows, "full_sweep_estimate": est,
               "wall_s": time.perf_counter() - t0, "load_avg_end": os.getloadavg()}
     print(f"\n(benchmark wall time {result['wall_s']:.0f} s; load average at start {start['load_avg'][0]:.2f}, "
-          f"end {result['load_avg_end'][0]:.2f}, {os.cpu_count()} CPUs)")
+          f"end {result['load_avg_end'][0]:.2f}, {os.cpu_count()} CPUs; code measured: {start['saltation']})")
     if args.json:
         with open(args.json, "w") as fh:
             json.dump(result, fh, indent=1)
