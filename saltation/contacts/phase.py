@@ -929,10 +929,12 @@ def _forces(cs, st, bc, model, box, per, s, dt, h, lo, hi, app, blk, t0, t1):
 
 
 @njit(cache=True, no_cfunc_wrapper=True, error_model="numpy", _nrt=False)
-def _kick_drift(cs, model, s_next, dt, h, lo, hi, app, t0, t1):
+def _kick_drift(cs, model, s_next, dt, h, lo, hi, app, t0, t1, kick_first):
     """First half of a sub-step for the active members t0..t1-1 of a block: half kick,
     drift (in member order: sequential memory). The forces at s_next follow (_forces),
-    once every member has drifted."""
+    once every member has drifted. ``kick_first``: the previous sub-step's second half
+    kick first, in the same pass (the operations of _kick, in its order; a member that
+    joined since has zero force, so that kick adds exactly zero)."""
     inv_m = 1.0 / model.mass
     inv_i = 1.0 / model.inertia
     active, dev, ft, dev_max = cs.active, cs.dev, cs.ft, cs.dev_max
@@ -941,6 +943,10 @@ def _kick_drift(cs, model, s_next, dt, h, lo, hi, app, t0, t1):
         if active[a] == 0:
             _at(cs, a, s_next, dt)
             continue
+        if kick_first:
+            for c in range(3):
+                dev[a, 3 + c] += 0.5 * h * ft[a, c] * inv_m
+                dev[a, 6 + c] += 0.5 * h * ft[a, 3 + c] * inv_i
         for c in range(3):
             dev[a, 3 + c] += 0.5 * h * ft[a, c] * inv_m
             dev[a, 6 + c] += 0.5 * h * ft[a, 3 + c] * inv_i
@@ -1426,12 +1432,15 @@ def _wake_up(cs, x0w, st, bc, model, cl, ph, s, dt, h, lo, hi, app, blk):
     return cs, q_hi
 
 
-KICK_DRIFT, FORCES, KICK = 0, 1, 2  # the parts of a sub-step (_substep_part)
+# the parts of a sub-step (_substep_part); KICK_KICK_DRIFT: the previous sub-step's second
+# half kick and this one's first part in one pass (one parallel launch less per sub-step)
+KICK_DRIFT, FORCES, KICK, KICK_KICK_DRIFT = 0, 1, 2, 3
 
 
 @njit(cache=True, no_cfunc_wrapper=True, parallel=True)
 def _substep_part(part, cs, st, bc, model, box, per, s, dt, h, lo, hi, app, blk, lanes, woke):
-    """One part of a sub-step of a large block (KICK_DRIFT, FORCES or KICK), its members
+    """One part of a sub-step of a large block (KICK_DRIFT, FORCES, KICK or
+    KICK_KICK_DRIFT), its members
     cut into ``lanes`` contiguous ranges done in parallel. Every member's arithmetic is
     its own (_forces), so the result is that of one thread, bit for bit. Returns the
     count of _forces (FORCES), else 0."""
@@ -1440,8 +1449,8 @@ def _substep_part(part, cs, st, bc, model, box, per, s, dt, h, lo, hi, app, blk,
         t0 = np.int64(q) * m // lanes
         t1 = (np.int64(q) + 1) * m // lanes
         v = as_tuple(cs, SubstepSet)  # the hot loops read tuples (grains/refs.py)
-        if part == KICK_DRIFT:
-            _kick_drift(v, model, s, dt, h, lo, hi, app, t0, t1)
+        if part == KICK_DRIFT or part == KICK_KICK_DRIFT:
+            _kick_drift(v, model, s, dt, h, lo, hi, app, t0, t1, part == KICK_KICK_DRIFT)
         elif part == FORCES:
             woke[q] = _forces(v, as_tuple(st, GrainState), as_tuple(bc, BedContext), model, box, per, s, dt, h,
                               lo, hi, app, blk, t0, t1)
@@ -1484,24 +1493,26 @@ def _run_block(cs, cand, c0, c1, lo, hi, blk, x0w, st, bc, model, cl, ph, dt, n_
         ptr, joined = _join(v, cand, ptr, c1, s_next, k / n_sub, dt)
         n_act += joined
         done += n_act
+        # the previous sub-step's second half kick is done in this pass (from k = 1)
         if lanes > 1:
-            _substep_part(np.int64(KICK_DRIFT), cs, st, bc, model, box, per, s_next, dt, h, lo, hi, app, blk, lanes,
-                          woke)
+            part = KICK_KICK_DRIFT if k > 0 else KICK_DRIFT
+            _substep_part(np.int64(part), cs, st, bc, model, box, per, s_next, dt, h, lo, hi, app, blk, lanes, woke)
             n_woke = _substep_part(np.int64(FORCES), cs, st, bc, model, box, per, s_next, dt, h, lo, hi, app, blk,
                                    lanes, woke)
         else:
             m = _block_size(v, lo, hi, app)
-            _kick_drift(v, model, s_next, dt, h, lo, hi, app, first, m)
+            _kick_drift(v, model, s_next, dt, h, lo, hi, app, first, m, k > 0)
             n_woke = _forces(v, sv, bv, model, box, per, s_next, dt, h, lo, hi, app, blk, first, m)
         if n_woke > 0:
             cs, k_w = _wake_up(cs, x0w, st, bc, model, cl, ph, s_next, dt, h, lo, hi, app, blk)
             n_act += k_w
             woken += k_w
             v = as_tuple(cs, SubstepSet)
-        if lanes > 1:
-            _substep_part(np.int64(KICK), cs, st, bc, model, box, per, s_next, dt, h, lo, hi, app, blk, lanes, woke)
-        else:
-            _kick(v, model, h, lo, hi, app, first, _block_size(v, lo, hi, app))
+    # the last sub-step's second half kick
+    if lanes > 1:
+        _substep_part(np.int64(KICK), cs, st, bc, model, box, per, 1.0, dt, h, lo, hi, app, blk, lanes, woke)
+    else:
+        _kick(v, model, h, lo, hi, app, first, _block_size(v, lo, hi, app))
     return cs, done, woken
 
 
