@@ -1440,10 +1440,9 @@ KICK_DRIFT, FORCES, KICK, KICK_KICK_DRIFT = 0, 1, 2, 3
 @njit(cache=True, no_cfunc_wrapper=True, parallel=True)
 def _substep_part(part, cs, st, bc, model, box, per, s, dt, h, lo, hi, app, blk, lanes, woke):
     """One part of a sub-step of a large block (KICK_DRIFT, FORCES, KICK or
-    KICK_KICK_DRIFT), its members
-    cut into ``lanes`` contiguous ranges done in parallel. Every member's arithmetic is
-    its own (_forces), so the result is that of one thread, bit for bit. Returns the
-    count of _forces (FORCES), else 0."""
+    KICK_KICK_DRIFT), its members cut into ``lanes`` contiguous ranges done in parallel.
+    Every member's arithmetic is its own (_forces), so the result is that of one thread,
+    bit for bit. Returns the count of _forces (FORCES), else 0."""
     m = _block_size(cs, lo, hi, app)
     for q in prange(lanes):
         t0 = np.int64(q) * m // lanes
