@@ -19,20 +19,25 @@ from cases import fingerprint  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 
-RUN = textwrap.dedent("""
+# the start of both scripts: records the kernels of each helper started (``started``);
+# count(k): (loaded from the cache, compiled here, compiled signatures) of kernel k in this process
+WATCH = textwrap.dedent("""
     import json, sys
     import saltation
-    from saltation.contacts import phase
-    from saltation.contacts.cells import stable_argsort
-    from saltation.engine import cold_start, stepping
-    before = cold_start.is_cached(stable_argsort, cold_start.typed(__import__("numpy").zeros(3)))
+    from saltation.engine import cold_start
     started = []
     start = cold_start.compile_elsewhere
     cold_start.compile_elsewhere = lambda jobs: (started.append([k.py_func.__name__ for k, _ in jobs]), start(jobs))[1]
+    count = lambda k: [sum(k._cache_hits.values()), sum(k._cache_misses.values()), len(k.overloads)]
+""")
+
+RUN = WATCH + textwrap.dedent("""
+    from saltation.contacts import phase
+    from saltation.contacts.cells import stable_argsort
+    from saltation.engine import stepping
+    before = cold_start.is_cached(stable_argsort, cold_start.typed(__import__("numpy").zeros(3)))
     res = saltation.run("cases/default.toml", out=sys.argv[1], progress=False, overwrite=True,
                         **{"run.n_particles": 40, "run.duration": 0.05, "output.vtk": False})
-    # (loaded from the cache, compiled here, compiled signatures) of each kernel in this process
-    count = lambda k: [sum(k._cache_hits.values()), sum(k._cache_misses.values()), len(k.overloads)]
     print(json.dumps({"contact": count(phase.soft_contact_phase), "flight": count(stepping._free_flight),
                       "bed": count(stepping._bed_pass), "helpers": started, "argsort_cached_before": before,
                       "argsort_cached_after": cold_start.is_cached(stable_argsort,
@@ -40,12 +45,12 @@ RUN = textwrap.dedent("""
 """)
 
 
-def _run(tmp_path, name, cache):
+def _run(tmp_path, name, cache, script=RUN):
     env = dict(os.environ, NUMBA_CACHE_DIR=str(cache), PYTHONPATH=str(ROOT))
     env.pop("SALTATION_SERIAL_COMPILE", None)
     out = tmp_path / name
-    proc = subprocess.run([sys.executable, "-c", RUN, str(out)], cwd=ROOT, env=env, capture_output=True, text=True,
-                          timeout=1200)
+    proc = subprocess.run([sys.executable, "-c", script, str(out)], cwd=ROOT, env=env, capture_output=True,
+                          text=True, timeout=1200)
     assert proc.returncode == 0, proc.stderr[-3000:]
     return json.loads(proc.stdout.strip().splitlines()[-1]), out
 
@@ -68,18 +73,11 @@ def test_the_helpers_contact_phase_is_used_and_the_run_is_the_same(tmp_path):
         assert np.array_equal(a[key], b[key]), key
 
 
-COMPOSITES = textwrap.dedent("""
-    import json, sys
-    import saltation
+COMPOSITES = WATCH + textwrap.dedent("""
     from saltation.contacts import composites
-    from saltation.engine import cold_start
     from saltation.flight import composites as flight
-    started = []
-    start = cold_start.compile_elsewhere
-    cold_start.compile_elsewhere = lambda jobs: (started.append([k.py_func.__name__ for k, _ in jobs]), start(jobs))[1]
     saltation.run("cases/default.toml", out=sys.argv[1], progress=False, overwrite=True,
                   **{"particle.shape": "mixture", "run.n_particles": 40, "run.duration": 0.05, "output.vtk": False})
-    count = lambda k: [sum(k._cache_hits.values()), sum(k._cache_misses.values()), len(k.overloads)]
     kernels = [flight.free_flight_pass, composites.advance_clusters_contacts, composites._reach,
                composites._build_list, composites._poses, composites._engage, composites.component_forces,
                composites._move_par, composites._move_ser, composites._force_kick_par, composites._force_kick_ser,
@@ -90,12 +88,7 @@ COMPOSITES = textwrap.dedent("""
 
 
 def test_composites_split_their_contact_phase_between_the_two_processes(tmp_path):
-    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cache"), PYTHONPATH=str(ROOT))
-    env.pop("SALTATION_SERIAL_COMPILE", None)
-    proc = subprocess.run([sys.executable, "-c", COMPOSITES, str(tmp_path / "run")], cwd=ROOT, env=env,
-                          capture_output=True, text=True, timeout=1200)
-    assert proc.returncode == 0, proc.stderr[-3000:]
-    res = json.loads(proc.stdout.strip().splitlines()[-1])
+    res, _ = _run(tmp_path, "run", tmp_path / "cache", COMPOSITES)  # empty cache: a first run
     (helper,) = res["helpers"]  # one helper, given the sub-step kernels
     assert helper == ["_poses", "_engage", "component_forces", "_move_par", "_move_ser", "_force_kick_par",
                       "_force_kick_ser", "_finish"], res

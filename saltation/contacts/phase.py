@@ -474,9 +474,9 @@ def _set_path(cs, a, s, dt):
 
 @njit(cache=True, no_cfunc_wrapper=True, inline="always", error_model="numpy", _nrt=False)
 def _position_of(cs, b, s, dt):
-    """x of member b at s (that of _state_of): most pairs looked at are not in contact,
-    and their velocities and spins are not needed (the inlined _hermite's unused
-    velocity is dropped by the compiler)."""
+    """x of member b at s (that of _state_of): its current position when active, else its
+    point on the free-flight path (the inlined _hermite's unused velocity is dropped by
+    the compiler). The force loop reads it from ``at`` (_at), once per member and sub-step."""
     if cs.active[b] != 0:
         return cs.cur[b, 0], cs.cur[b, 1], cs.cur[b, 2]
     p = cs.path
@@ -928,6 +928,14 @@ def _forces(cs, st, bc, model, box, per, s, dt, h, lo, hi, app, blk, t0, t1):
     return woke
 
 
+@njit(cache=True, no_cfunc_wrapper=True, inline="always", error_model="numpy", _nrt=False)
+def _half_kick(dev, ft, a, h, inv_m, inv_i):
+    """Half kick of member a's deviation velocity and spin by its contact force and torque."""
+    for c in range(3):
+        dev[a, 3 + c] += 0.5 * h * ft[a, c] * inv_m
+        dev[a, 6 + c] += 0.5 * h * ft[a, 3 + c] * inv_i
+
+
 @njit(cache=True, no_cfunc_wrapper=True, error_model="numpy", _nrt=False)
 def _kick_drift(cs, model, s_next, dt, h, lo, hi, app, t0, t1, kick_first):
     """First half of a sub-step for the active members t0..t1-1 of a block: half kick,
@@ -944,12 +952,9 @@ def _kick_drift(cs, model, s_next, dt, h, lo, hi, app, t0, t1, kick_first):
             _at(cs, a, s_next, dt)
             continue
         if kick_first:
-            for c in range(3):
-                dev[a, 3 + c] += 0.5 * h * ft[a, c] * inv_m
-                dev[a, 6 + c] += 0.5 * h * ft[a, 3 + c] * inv_i
+            _half_kick(dev, ft, a, h, inv_m, inv_i)
+        _half_kick(dev, ft, a, h, inv_m, inv_i)
         for c in range(3):
-            dev[a, 3 + c] += 0.5 * h * ft[a, c] * inv_m
-            dev[a, 6 + c] += 0.5 * h * ft[a, 3 + c] * inv_i
             dev[a, c] += h * dev[a, 3 + c]
         dd = dev[a, 0] ** 2 + dev[a, 1] ** 2 + dev[a, 2] ** 2
         if dd > dev_max[a]:
@@ -986,9 +991,7 @@ def _kick(cs, model, h, lo, hi, app, t0, t1):
         a = _block_member(t, lo, hi, app)
         if active[a] == 0:
             continue
-        for c in range(3):
-            dev[a, 3 + c] += 0.5 * h * ft[a, c] * inv_m
-            dev[a, 6 + c] += 0.5 * h * ft[a, 3 + c] * inv_i
+        _half_kick(dev, ft, a, h, inv_m, inv_i)
 
 
 @njit(cache=True, no_cfunc_wrapper=True, error_model="numpy", _nrt=False)
