@@ -256,7 +256,7 @@ def one_concentration(args) -> dict:
     import numpy as np
 
     from saltation.case.schema import load_case, resolve_domain
-    from saltation.contacts.phase import SUBSTEPPED
+    from saltation.contacts.phase import N_CLOCKS, SUBSTEPPED
     from saltation.engine.simulation import Simulation, _les_box_m, open_flow
     from saltation.flight.spheres import make_workspace
 
@@ -296,6 +296,7 @@ def one_concentration(args) -> dict:
     tables, values = _sweep_case(args.cases, args.one, args.tau_ratio)
     sim, ds, st, ws = build(tables, values)
     c, stp, f = sim.case, sim.stepper, ds.arrays
+    stp.ph = stp.ph._replace(clocks=np.zeros(N_CLOCKS))  # the contact phase's parts timed (CLOCK_*)
     n, n_sub = sim.n, stp.n_sub
     seconds_per_step = c.dt
     spin_steps = int(round(args.spinup / seconds_per_step))
@@ -347,6 +348,7 @@ def one_concentration(args) -> dict:
         numba.set_num_threads(th)
         s, w = restore()
         stp.timers[:] = 0.0
+        stp.ph.clocks[:] = 0.0
         cnt0 = stp.ph.counters.copy()
         load = os.getloadavg()[0]
         c0, t0 = time.process_time(), time.perf_counter()
@@ -367,6 +369,9 @@ def one_concentration(args) -> dict:
             "list_rebuilds": int(dc[0]), "overruns": int(dc[1]), "wakes": int(dc[2]), "missed": int(dc[4]),
             "blocks_per_step": float(dc[5]) / k, "redone": int(dc[6] + dc[7]),
             "load_avg_1min": load,
+            "contact_parts_us": {name: 1e6 * float(stp.ph.clocks[i]) / gs for i, name in enumerate(CONTACT_PARTS)},
+            "substeps_ns_per_substep_done": 1e9 * float(stp.ph.clocks[CONTACT_PARTS.index("substeps")]) / sub
+            if sub else None,
         }
         ends[th] = (s.pos.copy(), s.vel.copy())
         say(f"{th} thread(s): {gs / wall:.4g} grain-steps/s, load {load:.2f}")
@@ -411,6 +416,7 @@ def one_concentration(args) -> dict:
                 r1 = out["runs"]["1"]
                 if r1["contacts_ns_per_substep_done"]:
                     lam["ratio_per_engaged"] = r1["contacts_ns_per_substep_done"] / lam["ns_per_atom_step"]
+                    lam["ratio_substeps_per_engaged"] = r1["substeps_ns_per_substep_done"] / lam["ns_per_atom_step"]
                 lam["ratio_per_grain"] = r1["contacts_ns_per_grain_substep"] / lam["ns_per_atom_step"]
             if not args.keep:
                 shutil.rmtree(work, ignore_errors=True)
@@ -480,6 +486,9 @@ def sweep_estimate(rows, path, threads=1):
             "days_even_split": total / WORKERS / 86400.0, "days_longest_first": max(finish) / 86400.0}
 
 
+CONTACT_PARTS = ("list", "engage", "gather", "substeps", "conflicts", "scatter")  # contacts/phase.py CLOCK_*
+
+
 def print_table(rows, args):
     print(f"\nCases of {Path(args.cases).name}, tau*/tau*c = {args.tau_ratio}, spin-up {args.spinup} s simulated, "
           f"{args.steps} timed steps; times in us per grain-step")
@@ -498,6 +507,18 @@ def print_table(rows, args):
                   f"{x['cpu_per_wall']:>8.2f} {x['load_avg_1min']:>5.2f}")
     print("engaged: grains sub-stepped in a step / N; sub-sh.: grain-sub-steps done / (N n_sub); ns/sub: contact "
           "phase per grain-sub-step done")
+    print("\nThe contact phase by part, us per grain-step (contacts/phase.py CLOCK_*; sub-steps also in ns per "
+          "grain-sub-step done)")
+    head = f"{'C %':>5} {'thr':>3} " + " ".join(f"{p:>9}" for p in CONTACT_PARTS) + f" {'ns/sub':>7}"
+    print(head + "\n" + "-" * len(head))
+    for r in rows:
+        for th, x in r.get("runs", {}).items():
+            parts = x.get("contact_parts_us", {})
+            print(f"{r['concentration_pct']:>5.2f} {th:>3} " + " ".join(f"{parts.get(p, 0.0):>9.3f}" for p in CONTACT_PARTS)
+                  + f" {x.get('substeps_ns_per_substep_done') or 0.0:>7.0f}")
+    print("list: reach of every path and neighbour-list rebuild; engage: candidates and their earliest contacts; "
+          "gather: compact set, rows, near pairs, blocks; conflicts: the cross-block check (and redone passes); "
+          "scatter: results back")
     for r in rows:
         if "error" in r:
             continue
@@ -536,6 +557,8 @@ def print_table(rows, args):
                   f"{r1['contacts_ns_per_grain_substep']:.0f} ns per grain x sub-step of all grains")
             print(f"  ratio ours/LAMMPS per engaged grain-sub-step: {lam.get('ratio_per_engaged', float('nan')):.3g}"
                   f"   (ours sub-steps only engaged grains; LAMMPS every atom every step)")
+            print(f"  the same, our sub-steps alone (without the per-step set-up, which LAMMPS's steps have no "
+                  f"counterpart of): {lam.get('ratio_substeps_per_engaged', float('nan')):.3g}")
             print(f"  ratio ours/LAMMPS per grain x sub-step (all grains, same physical time): "
                   f"{lam['ratio_per_grain']:.3g}   (< 1: ours is cheaper)")
 

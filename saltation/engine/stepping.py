@@ -20,12 +20,11 @@ checkpoint must keep to continue bit for bit (contact history, counters, bed con
 from __future__ import annotations
 
 import math
-import time
 from typing import NamedTuple
 
 import numba
 import numpy as np
-from numba import njit, objmode, prange
+from numba import njit, prange
 
 from ..bed.jumps import BED_MIN_JUMP_DURATION, BED_MIN_JUMP_HEIGHT
 from ..bed.packed import make_packed_bed, packed_bed_check_particle
@@ -50,6 +49,7 @@ from ..flight.spheres import (  # the inline bed body
     free_flight_particles,
 )
 from ..grains.refs import as_tuple
+from ..io.progress import wall_clock
 from . import cold_start
 
 CONTACTS_OFF, CONTACTS_SOFT, CONTACTS_HARD = 0, 1, 2
@@ -60,13 +60,6 @@ BED_CONTACT_STATE = ("slot_id", "slot_c", "slot_shear", "in_bed")  # checkpointe
 LIST_HEIGHT = (4.0, 60.0)  # d: bounds of the contact grid's height (grains above share its top layer)
 
 __all__ = ["Stepper", "advance_split", "default_skin"]
-
-
-@njit(cache=True, no_cfunc_wrapper=True)
-def _clock():
-    with objmode(t="float64"):
-        t = time.perf_counter()
-    return t
 
 
 @njit(cache=True, no_cfunc_wrapper=True, parallel=True)
@@ -151,9 +144,9 @@ def advance_split(f, coef, bed, virtual, packed, st, w, hc, t0, dt, n_steps, top
         skip = ph.active  # ... or the sub-stepped ones
     for s in range(n_steps):
         t = (step0 + s) * dt  # from the global step index: never from where a chunk began
-        c0 = _clock()
+        c0 = wall_clock()
         _free_flight(f, coef, st, w, hc, t, dt)
-        c1 = _clock()
+        c1 = wall_clock()
         bad = False
         for p in range(n):
             if st.status[p] != OK:
@@ -164,10 +157,10 @@ def advance_split(f, coef, bed, virtual, packed, st, w, hc, t0, dt, n_steps, top
                                         soft.threads)
         if not bad and hard is not None:
             hard_contact_phase(st, cl, hard.restitution, hard.friction, scratch)
-        c2 = _clock()
+        c2 = wall_clock()
         if not bad:
             _bed_pass(st, w, t, dt, step0 + s, bed, virtual, packed, pb, last_contact, top, skip)
-        c3 = _clock()
+        c3 = wall_clock()
         timers[0] += c1 - c0
         timers[1] += c2 - c1
         timers[2] += c3 - c2
