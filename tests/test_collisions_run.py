@@ -11,7 +11,18 @@ import pytest
 from saltation.bed.packed import BED_CENTRE_Y, hexagonal_layer, make_packed_bed, packed_bed_check_particle
 from saltation.bed.virtual import bed_parameters
 from saltation.contacts import pairs as K
-from saltation.contacts.phase import empty_substep_set, make_bed_context, make_contact_phase, soft_contact_phase
+from saltation.contacts.phase import (
+    CLOCK_ENGAGE,
+    CLOCK_GATHER,
+    CLOCK_LIST,
+    CLOCK_SCATTER,
+    CLOCK_SUBSTEPS,
+    N_CLOCKS,
+    empty_substep_set,
+    make_bed_context,
+    make_contact_phase,
+    soft_contact_phase,
+)
 from saltation.engine.simulation import run
 from saltation.flight.spheres import make_state, make_workspace
 
@@ -39,14 +50,14 @@ def small_case(model="soft", n=400, duration=0.15, bed="virtual", seed=3, source
 # ----------------------------------------------------------------------------- kernel
 
 
-def _straight_steps(st, model, skin, dt, n_sub, steps, after_step=None):
+def _straight_steps(st, model, skin, dt, n_sub, steps, after_step=None, profile=False):
     """``steps`` steps of free flight without forces (straight paths) and the soft contact
     phase, virtual bed, in a 12 × 8 × 12 d box; ``after_step(ph)`` after each. Returns the
     ContactList and the ContactPhase."""
     n = st.pos.shape[0]
     ws = make_workspace(n)
     cl = K.make_contact_list(st.pos, (12.0, 8.0, 12.0), (True, False, True), 1.0, skin)
-    ph = make_contact_phase(n)
+    ph = make_contact_phase(n, profile=profile)
     bc = make_bed_context(n, False, make_packed_bed(3.0, 3.0), 0.65, 0.1, 0.5, model.kn, model.kt, 0,
                           np.full(n, -2, np.int64))
     cs = empty_substep_set()
@@ -111,6 +122,26 @@ def test_a_grain_not_engaged_is_woken_when_a_deflected_grain_hits_it():
     assert ph.counters[2] >= 1  # a wake-up happened
     assert st.vel[2, 0] > 1.0  # grain 2 was hit
     np.testing.assert_allclose(st.vel.sum(axis=0), p_total, atol=1e-9)
+
+
+def test_profiling_times_the_parts_and_changes_nothing():
+    """ContactPhase.clocks (bench_dense's split of the phase): with profiling on, every
+    part that ran has its time and the grains end in the same bits as without."""
+    model = K.make_contact_model(5e5, 0.9, 0.0)
+    ends = {}
+    for profile in (False, True):
+        pos0 = np.array([[5.0, 3.0, 5.0], [5.0 - 1.05, 3.0, 5.0], [5.0 + 1.0 + 0.1, 3.0, 5.0]])
+        vel0 = np.array([[0.0, 0.0, 0.0], [12.0, 0.0, 0.0], [0.0, 0.0, 0.0]])
+        st = make_state(pos0, vel0, np.zeros((3, 3)), 0.0, 4)
+        _, ph = _straight_steps(st, model, 0.6, 0.02, 128, 3, profile=profile)
+        ends[profile] = (st.pos.copy(), st.vel.copy())
+        if not profile:
+            assert ph.clocks.shape == (0,)
+    assert ph.clocks.shape == (N_CLOCKS,)
+    ran = [CLOCK_LIST, CLOCK_ENGAGE, CLOCK_GATHER, CLOCK_SUBSTEPS, CLOCK_SCATTER]
+    assert (ph.clocks[ran] > 0.0).all() and (ph.clocks >= 0.0).all()
+    np.testing.assert_array_equal(ends[True][0], ends[False][0])
+    np.testing.assert_array_equal(ends[True][1], ends[False][1])
 
 
 def test_the_jump_height_follows_a_grain_whether_or_not_the_contact_phase_took_it():
