@@ -326,9 +326,17 @@ def stencil_cells(grid, c, out):
 def min_image(dx, length, periodic):
     """Minimum-image separation along one axis. Exactly antisymmetric in dx for every
     pair closer than half the box (both grains of a pair see the negated value)."""
+    return dx - image_shift(dx, length, periodic)
+
+
+@njit(cache=True, no_cfunc_wrapper=True, inline="always")
+def image_shift(dx, length, periodic):
+    """What min_image takes off dx: a whole number of box lengths (0.0 on an open axis).
+    A pair's shift stays the same while its separation is not near half the box, so the
+    contact phase works it out once per step: (dx − shift) then has min_image's bits."""
     if periodic:
-        return dx - length * math.floor(dx / length + 0.5)
-    return dx
+        return length * math.floor(dx / length + 0.5)
+    return 0.0
 
 
 @njit(cache=True, no_cfunc_wrapper=True, inline="always")
