@@ -335,17 +335,18 @@ def image_shift(dx, length, periodic):
     A pair's shift stays the same while its separation is not near half the box, so the
     contact phase works it out once per step: (dx − shift) then has min_image's bits."""
     if periodic:
-        return length * math.floor(dx / length + 0.5)
+        return length * np.floor(dx / length + 0.5)  # np.floor: no round trip through an integer
     return 0.0
 
 
 @njit(cache=True, no_cfunc_wrapper=True, inline="always")
 def _min_image_by(dx, length, inv_length, periodic):
-    """min_image with the box's inverse length (a product, not a division: -17 % of the
-    list build at 3.94 %). The same value except within rounding of half a box length,
+    """min_image with the box's inverse length (a product, not a division) and np.floor
+    (no round trip through an integer): -38 % of the list build at 3.94 % with the
+    branch-free count. The same value except within rounding of half a box length,
     farther than any cutoff (make_grid), so the same list."""
     if periodic:
-        return dx - length * math.floor(dx * inv_length + 0.5)
+        return dx - length * np.floor(dx * inv_length + 0.5)
     return dx
 
 
