@@ -97,8 +97,9 @@ contact phase the bound ``max(|x₀ − x_ref|, |x₁ − x_ref|) + b`` is check
 rebuilt at x₀ when it exceeds s/2 (with saltation speeds of ~10 u* and Δt = 0.02 d/u*
 that is most steps: at 3.94 % every step). A rebuild is one counting sort and one cell
 sweep, but not cheap in the dense layer: cells sized for a widened skin hold ~28 grains
-each there, and the sweep costs ~1.1–1.35 µs per grain-step, as much as the RK4 step
-(``ContactPhase.clocks`` times every part of the phase). If a grain moves more than s/2 in one step, the skin is widened to 2.5× its
+each there (135 candidates per grain for 20 neighbours), and the rebuild costs ~1 µs per
+grain-step, about the RK4 step (``ContactPhase.clocks`` times every part of the phase).
+If a grain moves more than s/2 in one step, the skin is widened to 2.5× its
 reach, up to what the cells allow (stepping.Stepper makes them wide enough for twice the
 default skin, which covers 20 u*). A grain still faster, or deflected beyond the skin, is
 counted in ``overruns``; after such a step the end positions are searched afresh for
