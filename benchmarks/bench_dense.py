@@ -509,16 +509,20 @@ def print_table(rows, args):
           "phase per grain-sub-step done")
     print("\nThe contact phase by part, us per grain-step (contacts/phase.py CLOCK_*; sub-steps also in ns per "
           "grain-sub-step done)")
-    head = f"{'C %':>5} {'thr':>3} " + " ".join(f"{p:>9}" for p in CONTACT_PARTS) + f" {'ns/sub':>7}"
-    print(head + "\n" + "-" * len(head))
-    for r in rows:
-        for th, x in r.get("runs", {}).items():
-            parts = x.get("contact_parts_us", {})
-            print(f"{r['concentration_pct']:>5.2f} {th:>3} " + " ".join(f"{parts.get(p, 0.0):>9.3f}" for p in CONTACT_PARTS)
-                  + f" {x.get('substeps_ns_per_substep_done') or 0.0:>7.0f}")
-    print("list: reach of every path and neighbour-list rebuild; engage: candidates and their earliest contacts; "
-          "gather: compact set, rows, near pairs, blocks; conflicts: the cross-block check (and redone passes); "
-          "scatter: results back")
+    timed = [(r, th, x) for r in rows for th, x in r.get("runs", {}).items() if "contact_parts_us" in x]
+    if not timed:
+        print("  not in this result (saved by a version without ContactPhase.clocks)")
+    else:
+        head = f"{'C %':>5} {'thr':>3} " + " ".join(f"{p:>9}" for p in CONTACT_PARTS) + f" {'ns/sub':>7}"
+        print(head + "\n" + "-" * len(head))
+    for r, th, x in timed:
+        parts = x["contact_parts_us"]
+        print(f"{r['concentration_pct']:>5.2f} {th:>3} " + " ".join(f"{parts[p]:>9.3f}" for p in CONTACT_PARTS)
+              + f" {x.get('substeps_ns_per_substep_done') or 0.0:>7.0f}")
+    if timed:
+        print("list: reach of every path and neighbour-list rebuild; engage: candidates and their earliest "
+              "contacts; gather: compact set, rows, near pairs, blocks; conflicts: the cross-block check (and "
+              "redone passes); scatter: results back")
     for r in rows:
         if "error" in r:
             continue
