@@ -256,7 +256,7 @@ def one_concentration(args) -> dict:
     import numpy as np
 
     from saltation.case.schema import load_case, resolve_domain
-    from saltation.contacts.phase import N_CLOCKS, SUBSTEPPED
+    from saltation.contacts.phase import CLOCK_NAMES, CLOCK_SUBSTEPS, N_CLOCKS, SUBSTEPPED
     from saltation.engine.simulation import Simulation, _les_box_m, open_flow
     from saltation.flight.spheres import make_workspace
 
@@ -369,9 +369,8 @@ def one_concentration(args) -> dict:
             "list_rebuilds": int(dc[0]), "overruns": int(dc[1]), "wakes": int(dc[2]), "missed": int(dc[4]),
             "blocks_per_step": float(dc[5]) / k, "redone": int(dc[6] + dc[7]),
             "load_avg_1min": load,
-            "contact_parts_us": {name: 1e6 * float(stp.ph.clocks[i]) / gs for i, name in enumerate(CONTACT_PARTS)},
-            "substeps_ns_per_substep_done": 1e9 * float(stp.ph.clocks[CONTACT_PARTS.index("substeps")]) / sub
-            if sub else None,
+            "contact_parts_us": {name: 1e6 * float(stp.ph.clocks[i]) / gs for i, name in enumerate(CLOCK_NAMES)},
+            "substeps_ns_per_substep_done": 1e9 * float(stp.ph.clocks[CLOCK_SUBSTEPS]) / sub if sub else None,
         }
         ends[th] = (s.pos.copy(), s.vel.copy())
         say(f"{th} thread(s): {gs / wall:.4g} grain-steps/s, load {load:.2f}")
@@ -486,9 +485,6 @@ def sweep_estimate(rows, path, threads=1):
             "days_even_split": total / WORKERS / 86400.0, "days_longest_first": max(finish) / 86400.0}
 
 
-CONTACT_PARTS = ("list", "engage", "gather", "substeps", "conflicts", "scatter")  # contacts/phase.py CLOCK_*
-
-
 def print_table(rows, args):
     print(f"\nCases of {Path(args.cases).name}, tau*/tau*c = {args.tau_ratio}, spin-up {args.spinup} s simulated, "
           f"{args.steps} timed steps; times in us per grain-step")
@@ -513,13 +509,13 @@ def print_table(rows, args):
     if not timed:
         print("  not in this result (saved by a version without ContactPhase.clocks)")
     else:
-        head = f"{'C %':>5} {'thr':>3} " + " ".join(f"{p:>9}" for p in CONTACT_PARTS) + f" {'ns/sub':>7}"
+        names = list(timed[0][2]["contact_parts_us"])  # contacts/phase.CLOCK_NAMES, as saved
+        head = f"{'C %':>5} {'thr':>3} " + " ".join(f"{p:>9}" for p in names) + f" {'ns/sub':>7}"
         print(head + "\n" + "-" * len(head))
-    for r, th, x in timed:
-        parts = x["contact_parts_us"]
-        print(f"{r['concentration_pct']:>5.2f} {th:>3} " + " ".join(f"{parts[p]:>9.3f}" for p in CONTACT_PARTS)
-              + f" {x.get('substeps_ns_per_substep_done') or 0.0:>7.0f}")
-    if timed:
+        for r, th, x in timed:
+            parts = x["contact_parts_us"]
+            print(f"{r['concentration_pct']:>5.2f} {th:>3} " + " ".join(f"{parts[p]:>9.3f}" for p in names)
+                  + f" {x.get('substeps_ns_per_substep_done') or 0.0:>7.0f}")
         print("list: reach of every path and neighbour-list rebuild; engage: candidates and their earliest "
               "contacts; gather: compact set, rows, near pairs, blocks; conflicts: the cross-block check (and "
               "redone passes); scatter: results back")

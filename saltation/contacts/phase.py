@@ -271,6 +271,7 @@ CLOCK_SUBSTEPS = 3  # the sub-steps of every block (_run_block)
 CLOCK_CONFLICTS = 4  # cross-block check and redone passes' release (_conflicts, _release)
 CLOCK_SCATTER = 5  # results back to the grain arrays, missed-contact search (_scatter)
 N_CLOCKS = 6
+CLOCK_NAMES = ("list", "engage", "gather", "substeps", "conflicts", "scatter")  # by CLOCK_* index
 
 
 class BedContext(NamedTuple):
