@@ -1336,21 +1336,12 @@ def _gather(x0w, st, cl, bc, ph, dt, d, blocked, forced, cs, filtered):
         cs.gid[new[p]] = gid[p]
         cs.block[new[p]] = blk[p]
     cs.n[0] = members
-    pos, vel, spin = st.pos, st.vel, st.spin
     cand = np.empty(n_cand, np.int64)
     key = np.empty(n_cand)
-    m = 0
-    for a in range(members):
-        _set_member(cs, a, cs.gid[a], x0w, pos, vel, spin, start, cs.block[a])
-    for a in range(members):  # after every path is in: a row reads its neighbours' (_set_row)
-        g = cs.gid[a]
-        if start[g] <= 1.0:
-            _set_row(cs, a, st, cl, bc, ph)
-            cand[m] = a
-            key[m] = start[g]
-            m += 1
+    _fill(as_tuple(cs, SubstepSet), members, x0w, as_tuple(st, GrainState), as_tuple(cl, ContactList),
+          as_tuple(bc, BedContext), as_tuple(ph, ContactPhase), cand, key)
     if filtered:
-        _near_pairs(cs, cand, cl.grid.box, cl.grid.periodic, dt, d + 2.0 * ph.near_slack[0])
+        _near_pairs(as_tuple(cs, SubstepSet), cand, cl.grid.box, cl.grid.periodic, dt, d + 2.0 * ph.near_slack[0])
     by_start = cand[stable_argsort(key)]
     # stable counting sort by block: each block's candidates by start
     cstart = np.zeros(n_blocks + 1, np.int64)
@@ -1367,7 +1358,26 @@ def _gather(x0w, st, cl, bc, ph, dt, d, blocked, forced, cs, filtered):
     return cs, out, cstart, mstart, new
 
 
-@njit(cache=True, no_cfunc_wrapper=True)
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False)
+def _fill(cs, members, x0w, st, cl, bc, ph, cand, key):
+    """The paths of the set's members 0..members-1 and the rows of the candidates among
+    them (their member indices and starts into ``cand`` and ``key``, in member order).
+    On the tuples, compiled without reference counting: a StructRef's field is loaded and
+    counted at every read, and the rows write a dozen fields per entry (0.57 → 0.38 µs per
+    grain-step at 3.94 %). _near_pairs and _scatter_set likewise."""
+    m = 0
+    for a in range(members):
+        _set_member(cs, a, cs.gid[a], x0w, st.pos, st.vel, st.spin, ph.start, cs.block[a])
+    for a in range(members):  # after every path is in: a row reads its neighbours' (_set_row)
+        g = cs.gid[a]
+        if ph.start[g] <= 1.0:
+            _set_row(cs, a, st, cl, bc, ph)
+            cand[m] = a
+            key[m] = ph.start[g]
+            m += 1
+
+
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False)
 def _near_pairs(cs, cand, box, per, dt, limit):
     """near[k] = 0 for the row entries of the candidates ``cand`` whose free-flight paths
     stay further apart than ``limit`` over the step (_path_gap) and that are not in
@@ -1560,29 +1570,36 @@ def _group_of(cs, a, cell_of, forced, mstart):
 
 
 @njit(cache=True, no_cfunc_wrapper=True)
-def _conflicts(cs, dt, d, box, per, forced, new, mstart):
+def _conflicts(cs, dt, d, box, per, forced, new, mstart, far_slack):
     """The pairs of members that may have touched although their sub-steps did not look at
     each other: for every pair in an active member's row that is in another block
     ("Blocks") or far (near = 0, "Near pairs"), the free-flight paths come closer than d
     plus the largest deviations the two had. The groups of each such pair across blocks
     are joined in ``forced`` (an appended member, whose group is not known, joins its
     whole block). Returns their numbers (across blocks, far in one block): (0, 0)
-    certifies the pass."""
+    certifies the pass. A far pair whose two deviations add up to less than ``far_slack``
+    (2σ of the near filter, less room for rounding) needs no gap: _near_pairs found it
+    above d + 2σ, so it is above d + its deviations (at 3.94 % this skips nearly every far
+    pair: 0.31 → 0.10 µs per grain-step, the same pairs certified)."""
     m0 = mstart[mstart.shape[0] - 1]
     cell_of = np.empty(0, np.int64)  # set index → index in cell order (the gather's), when needed
-    path = cs.path
+    # the set's arrays as locals: a StructRef's field is loaded (and counted) at every read
+    path, active, dev_max, near = cs.path, cs.active, cs.dev_max, cs.near
+    rs, rc, nbr, block = cs.rs, cs.rc, cs.nbr, cs.block
     n_bad = 0
     n_far = 0
     for a in range(cs.n[0]):
-        if cs.active[a] == 0:
+        if active[a] == 0:
             continue
-        da = math.sqrt(cs.dev_max[a])
-        for k in range(cs.rs[a], cs.rs[a] + cs.rc[a]):
-            b = cs.nbr[k]
-            across = cs.block[b] != cs.block[a]
-            if not across and cs.near[k] != 0:
+        da = math.sqrt(dev_max[a])
+        for k in range(rs[a], rs[a] + rc[a]):
+            b = nbr[k]
+            across = block[b] != block[a]
+            if not across and near[k] != 0:
                 continue
-            db = math.sqrt(cs.dev_max[b]) if cs.active[b] != 0 else 0.0
+            db = math.sqrt(dev_max[b]) if active[b] != 0 else 0.0
+            if not across and da + db < far_slack:
+                continue  # a far pair's paths stay further apart than d + 2σ (_near_pairs): certified
             gap = _member_gap(path, a, b, box, per, dt)
             if gap - da - db > d * (1.0 + 1e-9):
                 continue
@@ -1614,6 +1631,13 @@ def _release(cs, st, ph):
 
 @njit(cache=True, no_cfunc_wrapper=True)
 def _scatter(cs, st, cl, bc, ph, skin_half):
+    """_scatter_set on the tuples of the set, the grains, the list, the bed and the phase."""
+    return _scatter_set(as_tuple(cs, SubstepSet), as_tuple(st, GrainState), as_tuple(cl, ContactList),
+                        as_tuple(bc, BedContext), as_tuple(ph, ContactPhase), skin_half)
+
+
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False)
+def _scatter_set(cs, st, cl, bc, ph, skin_half):
     """End of the phase: what the sub-steps changed back into the grain arrays; for the
     grains that had a contact the deviations are added, and the fluid re-sampled and
     the Basset history restarted (module docstring). Marks the sub-stepped grains in
@@ -1764,7 +1788,7 @@ def soft_contact_phase(state, x0w, model, cl, phase, bed, t0, step, dt, n_sub, c
         if n_blocks > 1 and forced.shape[0] == 0:
             forced = np.arange(mstart[n_blocks])  # the same members in every pass
         joined = forced.copy() if filtered else forced
-        n_bad, n_far = _conflicts(cs, dt, d, box, per, joined, new, mstart)
+        n_bad, n_far = _conflicts(cs, dt, d, box, per, joined, new, mstart, 2.0 * ph.near_slack[0] - 2e-9 * d)
         tic = _lap(ph, CLOCK_CONFLICTS, tic)
         if n_bad == 0 and n_far == 0:
             break
