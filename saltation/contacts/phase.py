@@ -92,13 +92,21 @@ top starts its soft bed contact with that overlap (rare; not counted).
 
 Neighbour list (contacts.pairs.ContactList, skin s)
 ---------------------------------------------
-Valid while no grain is more than s/2 from where the list was built. Before each
-contact phase the bound ``max(|x₀ − x_ref|, |x₁ − x_ref|) + b`` is checked and the list
-rebuilt at x₀ when it exceeds s/2 (with saltation speeds of ~10 u* and Δt = 0.02 d/u*
-that is most steps: at 3.94 % every step). A rebuild is one counting sort and one cell
-sweep, but not cheap in the dense layer: cells sized for a widened skin hold ~28 grains
-each there (135 candidates per grain for 20 neighbours), and the rebuild costs ~1 µs per
-grain-step, about the RK4 step (``ContactPhase.clocks`` times every part of the phase).
+Valid while no grain is more than s/2 from where the list was built, less one
+displacement c common to all grains: a pair's separation changes by the difference of the
+two displacements, which is that of the two with c taken out, so |Δr_ij| ≤ |e_i| + |e_j|
+with e = x − x_ref − c. Before each contact phase the bound ``max(|x₀ − x_ref − c₀|,
+|x₁ − x_ref − c₁|) + b`` is checked (c per axis the middle of the range of all
+displacements, at x₀ and at x₁: _drift; the path minus c, linear in s, stays within its
+chord's bound) and the list rebuilt at x₀ when it exceeds s/2 less LIST_ROOM, the room
+kept for the deviations of the sub-steps (at 3.94 % the largest deviation in a step is
+0.12 d on average, 0.18 d at most in 100 steps). Saltation carries the whole layer
+downstream at ~10 u*, 0.2 d per step of 0.02 d/u*: without c the list was rebuilt every
+step at 3.94 % and 2.07 %, with it every other step (200 → 101 rebuilds in 200 steps,
+the same bits). A rebuild is one counting sort and one cell sweep, but not cheap in the
+dense layer: cells sized for a widened skin hold ~28 grains each there (135 candidates
+per grain for 20 neighbours), and it costs ~1 µs per grain-step, about the RK4 step
+(``ContactPhase.clocks`` times every part of the phase).
 If a grain moves more than s/2 in one step, the skin is widened to 2.5× its
 reach, up to what the cells allow (stepping.Stepper makes them wide enough for twice the
 default skin, which covers 20 u*). A grain still faster, or deflected beyond the skin, is
@@ -242,6 +250,7 @@ GIANT_GROUP = 256  # members: a larger group (a dense layer percolating) is cut 
 GIANT_BLOCK_SLACK = 0.15  # d: those slacks
 GIANT_QUIET_SLACK = 0.02
 TOUCH_EPS = 1e-9  # relative safety of the join bounds against rounding (_first_touch)
+LIST_ROOM = 0.1  # d: room kept in the skin for the sub-steps' deviations ("Neighbour list")
 NEAR_SLACK = 0.1  # d: deviation each grain of a pair may have before a far pair is looked at ("Near pairs")
 PARALLEL_MEMBERS = 256  # candidates: a block this large runs its sub-steps on all threads
 MERGED_PASSES = 3  # passes redone with the conflicting groups joined before one that is a single block
@@ -762,12 +771,50 @@ def _bed_force(a, cs, st, bc, s, dt, h, update):
         cs.in_bed[a] = 1 if nb > 0 else 0
 
 
+DRIFT_CHUNKS = 64  # fixed chunks of the drift's min/max reduction (exact in any order)
+
+
+@njit(cache=True, no_cfunc_wrapper=True, parallel=True)
+def _drift(x0w, pos, ref, box, per):
+    """The common drift c (2, 3) at x₀ and at x₁: per axis, the middle of the range of the
+    grains' displacements from the list's reference positions. Any vector common to all
+    grains may be taken out of the list's validity test ("Neighbour list"); the middle of
+    the range makes the largest remaining displacement the smallest."""
+    n = pos.shape[0]
+    lo = np.full((DRIFT_CHUNKS, 2, 3), np.inf)
+    hi = np.full((DRIFT_CHUNKS, 2, 3), -np.inf)
+    size = (n + DRIFT_CHUNKS - 1) // DRIFT_CHUNKS
+    for q in prange(DRIFT_CHUNKS):
+        for i in range(q * size, min(n, (q + 1) * size)):
+            for a in range(3):
+                e0 = min_image(x0w[i, a] - ref[i, a], box[a], per[a])
+                e1 = min_image(pos[i, a] - ref[i, a], box[a], per[a])
+                lo[q, 0, a] = min(lo[q, 0, a], e0)
+                hi[q, 0, a] = max(hi[q, 0, a], e0)
+                lo[q, 1, a] = min(lo[q, 1, a], e1)
+                hi[q, 1, a] = max(hi[q, 1, a], e1)
+    c = np.zeros((2, 3))
+    if n == 0:
+        return c
+    for k in range(2):
+        for a in range(3):
+            low = np.inf
+            high = -np.inf
+            for q in range(DRIFT_CHUNKS):
+                low = min(low, lo[q, k, a])
+                high = max(high, hi[q, k, a])
+            c[k, a] = 0.5 * (low + high)
+    return c
+
+
 @njit(cache=True, no_cfunc_wrapper=True, parallel=True)
 def _reach(x0w, pos, vel, dt, cl, ph):
     """D (reach of the free-flight path from x₀) per grain; returns the largest
-    displacement bound from the list's reference positions."""
+    displacement bound from the list's reference positions, less the common drift
+    (_drift): ``max(|x₀ − x_ref − c₀|, |x₁ − x_ref − c₁|) + b`` ("Neighbour list")."""
     n = pos.shape[0]
     box, per, ref = cl.grid.box, cl.grid.periodic, cl.ref_pos
+    c = _drift(x0w, pos, ref, box, per)
     # arrays unpacked before the parallel loop: Numba 0.68 drops writes made in a prange
     # body through a named tuple's arrays (flight/spheres.py)
     active, reach, worst = ph.active, ph.reach, ph.ref_bound
@@ -784,8 +831,8 @@ def _reach(x0w, pos, vel, dt, cl, ph):
             ch += step * step
             b0 += (x0w[i, 3 + a] - vbar) ** 2
             b1 += (vel[i, a] - vbar) ** 2
-            e0 = min_image(x0w[i, a] - ref[i, a], box[a], per[a])
-            e1 = min_image(pos[i, a] - ref[i, a], box[a], per[a])
+            e0 = min_image(x0w[i, a] - ref[i, a], box[a], per[a]) - c[0, a]
+            e1 = min_image(pos[i, a] - ref[i, a], box[a], per[a]) - c[1, a]
             r0 += e0 * e0
             r1 += e1 * e1
         bulge = 0.25 * dt * (math.sqrt(b0) + math.sqrt(b1))
@@ -1285,6 +1332,13 @@ def _blocks(x0w, pos, vel, cl, ph, gid, dt, d, cap, forced):
     return new, blk, starts[:n_blocks + 1].copy()
 
 
+@njit(cache=True, no_cfunc_wrapper=True, inline="always")
+def _near_band(ph):
+    """2σ: how far beyond d a near pair's free-flight paths may be apart ("Near pairs"):
+    the near filter's limit (_gather) and the far pairs' certificate (_conflicts)."""
+    return 2.0 * ph.near_slack[0]
+
+
 @njit(cache=True, no_cfunc_wrapper=True)
 def _gather(x0w, st, cl, bc, ph, dt, d, blocked, forced, cs, filtered):
     """The SubstepSet of this phase: the candidates (start ≤ 1) with their rows and their
@@ -1341,7 +1395,7 @@ def _gather(x0w, st, cl, bc, ph, dt, d, blocked, forced, cs, filtered):
     _fill(as_tuple(cs, SubstepSet), members, x0w, as_tuple(st, GrainState), as_tuple(cl, ContactList),
           as_tuple(bc, BedContext), as_tuple(ph, ContactPhase), cand, key)
     if filtered:
-        _near_pairs(as_tuple(cs, SubstepSet), cand, cl.grid.box, cl.grid.periodic, dt, d + 2.0 * ph.near_slack[0])
+        _near_pairs(as_tuple(cs, SubstepSet), cand, cl.grid.box, cl.grid.periodic, dt, d + _near_band(ph))
     by_start = cand[stable_argsort(key)]
     # stable counting sort by block: each block's candidates by start
     cstart = np.zeros(n_blocks + 1, np.int64)
@@ -1364,7 +1418,7 @@ def _fill(cs, members, x0w, st, cl, bc, ph, cand, key):
     them (their member indices and starts into ``cand`` and ``key``, in member order).
     On the tuples, compiled without reference counting: a StructRef's field is loaded and
     counted at every read, and the rows write a dozen fields per entry (0.57 → 0.38 µs per
-    grain-step at 3.94 %). _near_pairs and _scatter_set likewise."""
+    grain-step at 3.94 %). _scatter_set likewise (_near_pairs on the unpacked arrays)."""
     m = 0
     for a in range(members):
         _set_member(cs, a, cs.gid[a], x0w, st.pos, st.vel, st.spin, ph.start, cs.block[a])
@@ -1377,23 +1431,26 @@ def _fill(cs, members, x0w, st, cl, bc, ph, cand, key):
             m += 1
 
 
-@njit(cache=True, no_cfunc_wrapper=True, _nrt=False)
+@njit(cache=True, no_cfunc_wrapper=True, parallel=True)
 def _near_pairs(cs, cand, box, per, dt, limit):
     """near[k] = 0 for the row entries of the candidates ``cand`` whose free-flight paths
     stay further apart than ``limit`` over the step (_path_gap) and that are not in
-    contact from the last step ("Near pairs"); the others listed in nx (nn of them)."""
-    path = cs.path
-    for t in range(cand.shape[0]):
+    contact from the last step ("Near pairs"); the others listed in nx (nn of them).
+    Each candidate writes only its own row: the candidates run on all threads."""
+    # arrays unpacked before the parallel loop: Numba 0.68 drops writes made in a prange
+    # body through a named tuple's arrays (flight/spheres.py)
+    path, rs, rc, nbr, touch, near, nx, nn = cs.path, cs.rs, cs.rc, cs.nbr, cs.touch, cs.near, cs.nx, cs.nn
+    for t in prange(cand.shape[0]):
         a = cand[t]
-        r0 = cs.rs[a]
+        r0 = rs[a]
         m = 0
-        for k in range(r0, r0 + cs.rc[a]):
-            if cs.touch[k] == 0 and _member_gap(path, a, cs.nbr[k], box, per, dt) > limit:
-                cs.near[k] = 0
+        for k in range(r0, r0 + rc[a]):
+            if touch[k] == 0 and _member_gap(path, a, nbr[k], box, per, dt) > limit:
+                near[k] = 0
             else:
-                cs.nx[r0 + m] = k
+                nx[r0 + m] = k
                 m += 1
-        cs.nn[a] = m
+        nn[a] = m
 
 
 @njit(cache=True, no_cfunc_wrapper=True)
@@ -1724,7 +1781,7 @@ def soft_contact_phase(state, x0w, model, cl, phase, bed, t0, step, dt, n_sub, c
     n = pos.shape[0]
     skin_half = 0.5 * cl.skin
     worst = _reach(x0w, pos, vel, dt, cl, ph)
-    if worst > skin_half:
+    if worst > skin_half - LIST_ROOM:
         for i in range(n):
             for a in range(3):
                 ph.x0pos[i, a] = x0w[i, a]
@@ -1788,7 +1845,7 @@ def soft_contact_phase(state, x0w, model, cl, phase, bed, t0, step, dt, n_sub, c
         if n_blocks > 1 and forced.shape[0] == 0:
             forced = np.arange(mstart[n_blocks])  # the same members in every pass
         joined = forced.copy() if filtered else forced
-        n_bad, n_far = _conflicts(cs, dt, d, box, per, joined, new, mstart, 2.0 * ph.near_slack[0] - 2e-9 * d)
+        n_bad, n_far = _conflicts(cs, dt, d, box, per, joined, new, mstart, _near_band(ph) - 2e-9 * d)
         tic = _lap(ph, CLOCK_CONFLICTS, tic)
         if n_bad == 0 and n_far == 0:
             break
