@@ -271,6 +271,39 @@ def test_results_do_not_depend_on_the_neighbour_skin(tmp_path):
     assert a["particle_particle"] == b["particle_particle"] and a["overlap"] == b["overlap"]
 
 
+def test_one_block_after_a_giant_block_gives_the_same_bits(tmp_path):
+    """Blocks never change a result, only what the phase costs ("Blocks"): when one block
+    holds most members the next steps run as one block. The dense LES layer (3.94 %) run
+    with blocks tried in every step (``ph.unblocked[1] = 0``) and with the default ends in
+    the same bits, the default with fewer blocks. Fails when the rule is not applied or
+    when running as one block changes a result."""
+    import pandas as pd
+
+    from saltation.case.schema import load_case, resolve_domain
+    from saltation.contacts.phase import BLOCKS, SUBSTEPPED, UNBLOCKED_STEPS
+    from saltation.engine.simulation import Simulation, _les_box_m, open_flow
+
+    case = small_case("soft", n=None, duration=0.1, source="les", seed=5, **{"run.concentration": 0.0394})
+    del case["run"]["n_particles"]
+    case["run"]["domain"] = [0.032, 0.004, 0.028]  # ~800 grains: more members than one block holds
+    case["output"]["tracks_interval"] = 0.1
+    c = load_case(case)
+    ds = open_flow(c)
+    c = resolve_domain(c, _les_box_m(ds, c))
+    runs = {}
+    for steps in (0, UNBLOCKED_STEPS):
+        sim = Simulation(c, ds, tmp_path / f"u{steps}", progress=False)
+        sim.stepper.ph.unblocked[1] = steps
+        result = sim.run()
+        runs[steps] = (result, int(sim.stepper.ph.counters[BLOCKS]), int(sim.stepper.ph.counters[SUBSTEPPED]))
+    (always, blocks_always, _), (default, blocks_default, substepped) = runs[0], runs[UNBLOCKED_STEPS]
+    assert substepped > 0 and blocks_default < blocks_always
+    pd.testing.assert_frame_equal(always.tracks, default.tracks, check_exact=True)
+    for name in ("jumps.parquet", "particles.parquet"):
+        pd.testing.assert_frame_equal(pd.read_parquet(always.directory / name),
+                                      pd.read_parquet(default.directory / name), check_exact=True)
+
+
 def test_hard_sphere_run_collides(tmp_path):
     res = run(small_case("hard", duration=0.08), out=tmp_path / "hard", progress=False)
     c = res.summary["collisions"]

@@ -366,7 +366,7 @@ class Stepper:
                         ("ref_pos", "nbr", "nbr_count", "shear", "touch", "n_touch", "collisions",
                          "max_overlap", "builds")})
             out.update({"ph_" + k: getattr(ph, k) for k in ("contact_substeps", "overlap_sum", "counters",
-                                                            "bed_overlap_max")})
+                                                            "bed_overlap_max", "unblocked")})
             # the bed as a soft contact of sub-stepped grains: its springs and contact slots
             # carry over from step to step (contacts.phase.BedContext)
             out.update({"bc_" + k: getattr(self.bc, k) for k in BED_CONTACT_STATE})
@@ -396,6 +396,8 @@ class Stepper:
         self.cl = cl
         for name in ("contact_substeps", "overlap_sum", "bed_overlap_max"):
             getattr(self.ph, name)[...] = arrays["ph_" + name]
+        if "ph_unblocked" in arrays:  # older checkpoints: blocks tried at the next step
+            self.ph.unblocked[...] = arrays["ph_unblocked"]
         saved = arrays["ph_counters"]  # older checkpoints have 5 or 7
         self.ph.counters[:saved.shape[0]] = saved
         for name in BED_CONTACT_STATE:
