@@ -99,19 +99,20 @@ that is most steps: at 3.94 % every step). A rebuild is one counting sort and on
 sweep, but not cheap in the dense layer: cells sized for a widened skin hold ~28 grains
 each there (135 candidates per grain for 20 neighbours), and the rebuild costs ~1 µs per
 grain-step, about the RK4 step (``ContactPhase.clocks`` times every part of the phase).
-Known gap: the list holds every pair that can come within d, not every pair within the
-engagement test's reach (d plus both margins, up to three reaches each for a grain ending
-below the bed top). Which grains are candidates, and so which have the soft bed rather
-than the hard one, can therefore depend on when the list was last built: in the default
-dilute case a rebuild schedule that leaves out a drift common to all grains (every other
-step instead of every step in the dense layer, 8 % faster at 3.94 %) gives other bits
-(108 011 → 107 760 jumps in 10 s). The dense regression cases do not show it.
 If a grain moves more than s/2 in one step, the skin is widened to 2.5× its
 reach, up to what the cells allow (stepping.Stepper makes them wide enough for twice the
 default skin, which covers 20 u*). A grain still faster, or deflected beyond the skin, is
 counted in ``overruns``; after such a step the end positions are searched afresh for
 pairs in contact that the list does not hold (``missed_contacts``, reported in
 summary.json; the tests require zero).
+Known gap: the list holds every pair that can come within d, not every pair within the
+engagement test's reach (d plus both margins, up to three reaches each for a grain ending
+below the bed top). Which grains are candidates, and so which have the soft bed rather
+than the hard one, can therefore depend on when the list was last built and with what
+skin. In the default dilute case ``collisions.skin = 0.9`` gives 107 215 jumps in 10 s
+against 108 011, and a rebuild test that leaves out a drift common to all grains (every
+other step instead of every step in the dense layer: list part 1.05 → 0.55 µs per
+grain-step at 3.94 %) gave 107 760, so it was not kept. The dense cases do not show it.
 
 Memory layout (cost linear in N)
 --------------------------------
