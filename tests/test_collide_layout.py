@@ -89,3 +89,24 @@ def test_the_compact_set_grows_without_losing_its_contents():
     np.testing.assert_array_equal(big.shear[:5], cs.shear[:5])
     np.testing.assert_array_equal(big.slot_c[:3], cs.slot_c[:3])
     assert substep_view(_grow(big_ref, 2, 2)).gid.shape[0] == big.gid.shape[0]  # room enough: kept
+
+
+def test_a_grain_hitting_the_bed_beside_an_unlisted_grain_is_a_candidate():
+    """Grain 0 falls onto the bed (its hard rebound could move it by twice its reach, 0.4 d)
+    1.58 d from grain 1, which stands still: by the margins they may meet, so grain 0 is
+    sub-stepped with the soft bed, whether the list (skin 0.5: cutoff 1.5 d) holds the pair
+    or not (skin 0.8). Fails when only the list's rows are searched."""
+    pos0 = np.array([[5.0, 0.6, 5.0], [6.55, 0.9, 5.0]])
+    vel0 = np.array([[0.0, -10.0, 0.0], [0.0, 0.0, 0.0]])
+    out = {}
+    for skin in (0.5, 0.8):
+        st, cl, ph = run_contact_phase(pos0, vel0, steps=1, skin=skin)
+        listed = 1 in cl.nbr[0, :cl.nbr_count[0]]
+        out[skin] = (listed, ph.active.copy(), st.pos.copy(), st.vel.copy())
+    assert not out[0.5][0] and out[0.8][0]  # the pair is listed with the wider skin only
+    for skin in (0.5, 0.8):
+        listed, active, pos, vel = out[skin]
+        assert active[0] == 1 and active[1] == 0
+        assert vel[0, 1] > 0.0  # rebounded off the (soft) bed
+        np.testing.assert_array_equal(pos, out[0.5][2])
+        np.testing.assert_array_equal(vel, out[0.5][3])
