@@ -124,6 +124,40 @@ def test_a_grain_not_engaged_is_woken_when_a_deflected_grain_hits_it():
     np.testing.assert_allclose(st.vel.sum(axis=0), p_total, atol=1e-9)
 
 
+def test_the_list_is_not_rebuilt_for_a_drift_common_to_all_grains():
+    """The list's validity test takes out one displacement common to all grains (phase._drift):
+    a layer moving as a whole by more than half the skin per step keeps its list, grains
+    moving across each other by as much do not, and both find the same contact as a list rebuilt
+    every step would (the pair at 1.02 d closing at 0.05 d per step). Fails when the
+    common drift is not taken out (every step rebuilds) or is taken out of relative
+    motion."""
+    from saltation.contacts.phase import LIST_REBUILDS, LIST_ROOM
+
+    model = K.make_contact_model(5e5, 0.9, 0.0)
+    skin = 0.8
+    step = 0.5 * skin  # per step, more than the skin's half less the room for deviations
+    assert step > 0.5 * skin - LIST_ROOM
+    lattice = np.array([[x, y, z] for x in (1.5, 4.5, 7.5, 10.5) for y in (2.0, 5.0) for z in (1.5, 4.5, 7.5, 10.5)])
+    pair = np.array([[6.0, 3.5, 6.0], [6.0 + 1.02, 3.5, 6.0]])
+    pos0 = np.vstack([lattice, pair])
+    n = len(pos0)
+    closing = np.zeros((n, 3))
+    dt = 0.02
+    closing[-1, 0] = -0.05 / dt  # the pair closes by 0.05 d per step
+
+    def rebuilds(vel, steps=4):
+        st = make_state(pos0.copy(), vel.copy(), np.zeros((n, 3)), 0.0, 4)
+        cl, ph = _straight_steps(st, model, skin, dt, 128, steps)
+        return int(ph.counters[LIST_REBUILDS]), int(cl.collisions.sum())
+
+    together = np.tile([step / dt, 0.0, 0.0], (n, 1)) + closing
+    apart = together.copy()
+    apart[: len(lattice) // 2] = [0.0, 0.0, step / dt]  # half the lattice across (no collisions in 4 steps)
+    assert rebuilds(together) == (0, 2)
+    moved, collided = rebuilds(apart)
+    assert moved >= 2 and collided == 2
+
+
 def test_profiling_times_the_parts_and_changes_nothing():
     """ContactPhase.clocks (bench_dense's split of the phase): with profiling on, every
     part that ran has its time and the grains end in the same bits as without."""

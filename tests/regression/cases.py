@@ -41,6 +41,17 @@ MACHINE = machine_signature()
 REFERENCE = HERE / "references" / f"{MACHINE}.npz"
 if not REFERENCE.exists():
     REFERENCE = LEGACY_REFERENCE
+# summary numbers that count work, not physics, changed by a change recorded on another
+# machine (references/<machine>.json: case -> keys and why); on this machine they are not
+# compared until its reference is re-recorded (make_reference.py removes the entry)
+STALE_COUNTERS_FILE = REFERENCE.with_suffix(".json")
+
+
+def stale_counters() -> dict:
+    """{case: {"keys": [...], "why": ...}} of this machine's reference (empty: none)."""
+    if not STALE_COUNTERS_FILE.exists():
+        return {}
+    return json.loads(STALE_COUNTERS_FILE.read_text()).get("stale_counters", {})
 D = 0.69e-3
 
 
@@ -148,9 +159,24 @@ def run_case(name: str, out: Path) -> dict[str, np.ndarray]:
     return fingerprint(out)
 
 
-def compare(name: str, got: dict, ref: dict) -> list[str]:
-    """What differs between a fingerprint and the reference (empty: identical bits)."""
+def _without(fp: dict, keys) -> dict:
+    """The fingerprint without the summary numbers ``keys``."""
+    if not keys:
+        return fp
+    names = list(fp["summary/keys"])
+    keep = [i for i, k in enumerate(names) if k not in set(keys)]
+    out = dict(fp)
+    out["summary/keys"] = fp["summary/keys"][keep]
+    out["summary/values"] = fp["summary/values"][keep]
+    return out
+
+
+def compare(name: str, got: dict, ref: dict, skip=()) -> list[str]:
+    """What differs between a fingerprint and the reference (empty: identical bits);
+    ``skip``: summary numbers left out of both (stale_counters)."""
     bad = []
+    if skip:
+        got, ref = _without(got, skip), _without(ref, skip)
     for k in sorted(set(got) | set(ref)):
         if k not in got or k not in ref:
             bad.append(f"{name}: {k} only in {'reference' if k in ref else 'this run'}")
