@@ -62,6 +62,7 @@ __all__ = [
     "neighbour_pairs",
     "allocate_cells",
     "axis_index",
+    "axis_span",
     "grid_shape",
     "stencil_cell",
     "sort_points",
@@ -136,6 +137,19 @@ def axis_index(x, n, size, length, periodic):
     if f >= n:
         return n - 1
     return int(f)
+
+
+@njit(cache=True, no_cfunc_wrapper=True, inline="always")
+def axis_span(k, n, periodic, w):
+    """Cell layers within w layers of layer k on an axis of n layers, each once:
+    (first, how many); layer first + t is taken modulo n on a periodic axis, clipped to
+    the axis on a bounded one. For searches wider than the 3-layer stencil."""
+    if periodic:
+        if 2 * w + 1 >= n:
+            return 0, n
+        return k - w, 2 * w + 1
+    lo = max(0, k - w)
+    return lo, min(n - 1, k + w) - lo + 1
 
 
 @njit(cache=True, no_cfunc_wrapper=True)

@@ -137,7 +137,7 @@ from ..grains.refs import as_tuple, struct_ref
 from ..io.progress import wall_clock
 from ..physics.contact_law import spring_dashpot
 from ..physics.history import history_mark_impact
-from .cells import axis_index, grid_shape, min_image, sort_points, stencil_cell
+from .cells import axis_index, axis_span, grid_shape, min_image, sort_points, stencil_cell
 from .path import hermite_weights
 
 __all__ = ["ClusterContacts", "compile_jobs", "make_cluster_contacts", "with_packed_bed", "contact_parameters", "substeps", "contact_phase",
@@ -506,10 +506,8 @@ def _bed_list_pass(cp, comps, dcomp, creach, skin, pb, nbr, cnt):
         lim = 0.5 * (dcomp[a] + 1.0) + creach[a] + skin
         if cp[a, 1] - BED_CENTRE_Y < lim:
             ix, iz = bed_cell(pb, cp[a, 0], cp[a, 2])
-            mx = int(math.ceil(lim / pb.size[0]))
-            mz = int(math.ceil(lim / pb.size[2]))
-            x_lo, x_n = (0, nx) if 2 * mx + 1 >= nx else (ix - mx + nx, 2 * mx + 1)
-            z_lo, z_n = (0, nz) if 2 * mz + 1 >= nz else (iz - mz + nz, 2 * mz + 1)
+            x_lo, x_n = axis_span(ix, nx, True, int(math.ceil(lim / pb.size[0])))
+            z_lo, z_n = axis_span(iz, nz, True, int(math.ceil(lim / pb.size[2])))
             for i in range(x_n):
                 for j in range(z_n):
                     c = ((x_lo + i) % nx) * nz + (z_lo + j) % nz

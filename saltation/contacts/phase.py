@@ -249,7 +249,7 @@ from ..io.progress import wall_clock
 from ..physics.contact_law import lever_torque, sphere_contact_velocity, spring_dashpot
 from ..physics.history import history_mark_impact
 from ..physics.rng import uniform2
-from .cells import build_cells, image_shift, min_image, stable_argsort, stencil_cells
+from .cells import axis_span, build_cells, image_shift, min_image, stable_argsort, stencil_cells
 from .pairs import (
     LEVER_RADIUS,
     ContactList,
@@ -963,18 +963,6 @@ def _engage_listed(x0w, pos, box, per, nbr, nbr_count, n_touch, in_bed, slot_id,
         start[i] = 0.0 if hit else np.inf
 
 
-@njit(cache=True, no_cfunc_wrapper=True, inline="always")
-def _axis_span(k, n, periodic, w):
-    """Cell layers within w layers of layer k on an axis of n layers, each once:
-    (first, how many); layer first + t is taken modulo n on a periodic axis."""
-    if periodic:
-        if 2 * w + 1 >= n:
-            return 0, n
-        return k - w, 2 * w + 1
-    lo = max(0, k - w)
-    return lo, min(n - 1, k + w) - lo + 1
-
-
 @njit(cache=True, no_cfunc_wrapper=True)
 def _engage_unlisted(x0w, pos, d, cl, ph, c0):
     """Second pass of the candidate test: the pairs the list need not hold.
@@ -987,12 +975,13 @@ def _engage_unlisted(x0w, pos, d, cl, ph, c0):
     the bed fast: m is three reaches) is tested here against every grain within
     d + u_i + max u of its reference position, found through the list's cells (built at
     the references), and a pair that may meet makes both candidates. Serial: such grains
-    are few. Returns how many were searched."""
+    are few."""
     n = x0w.shape[0]
     g = cl.grid
     box, per, ref, margin, start = g.box, g.periodic, cl.ref_pos, ph.margin, ph.start
     half = 0.5 * (cl.cutoff - d) - TOUCH_EPS * d
     wide = np.empty(n, np.int64)
+    wide_u = np.empty(n)
     n_wide = 0
     u_max = 0.0
     for i in range(n):
@@ -1004,19 +993,16 @@ def _engage_unlisted(x0w, pos, d, cl, ph, c0):
         u_max = max(u_max, u)
         if u > half:
             wide[n_wide] = i
+            wide_u[n_wide] = u
             n_wide += 1
     ny, nz = g.n[1], g.n[2]
     for t in range(n_wide):
         i = wide[t]
-        e2 = 0.0
-        for a in range(3):
-            e = min_image(x0w[i, a] - ref[i, a], box[a], per[a]) - c0[a]
-            e2 += e * e
-        reach = (d + math.sqrt(e2) + margin[i] + u_max) * (1.0 + TOUCH_EPS)
+        reach = (d + wide_u[t] + u_max) * (1.0 + TOUCH_EPS)
         c = cl.cell_of[i]
-        fx, mx = _axis_span(c // (ny * nz), g.n[0], per[0], int(math.ceil(reach / g.size[0])))
-        fy, my = _axis_span((c // nz) % ny, ny, per[1], int(math.ceil(reach / g.size[1])))
-        fz, mz = _axis_span(c % nz, nz, per[2], int(math.ceil(reach / g.size[2])))
+        fx, mx = axis_span(c // (ny * nz), g.n[0], per[0], int(math.ceil(reach / g.size[0])))
+        fy, my = axis_span((c // nz) % ny, ny, per[1], int(math.ceil(reach / g.size[1])))
+        fz, mz = axis_span(c % nz, nz, per[2], int(math.ceil(reach / g.size[2])))
         for sx in range(mx):
             cx = (fx + sx) % g.n[0]
             for sy in range(my):
@@ -1028,7 +1014,6 @@ def _engage_unlisted(x0w, pos, d, cl, ph, c0):
                         if j != i and _may_meet(x0w, pos, margin, i, j, d, box, per):
                             start[i] = 0.0
                             start[j] = 0.0
-    return n_wide
 
 
 @njit(cache=True, no_cfunc_wrapper=True, parallel=True)
