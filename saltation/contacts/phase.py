@@ -216,6 +216,29 @@ spin-up, 100 steps, one thread): the contact phase 10.45 s without the filter, 8
 σ = 0.1 d and no phase redone; σ = 0.15: 10.1 s; 0.075: 9.1 s, 3 redone; 0.05: 15.3 s,
 70 redone.
 
+Retired members. At 3.94 % more than half of the active grain-sub-steps come after the
+grain's last contact in the step (it left the bed layer, or a neighbour): each still looks
+at its row and the bed at every sub-step and finds nothing. So an active member that
+touches nothing at s (no pair, no bed sphere: zero force) *retires* (``active`` = RETIRED)
+when nothing can touch it for the rest of the step unless something else is deflected into
+it (_may_retire). Unforced, its deviation moves at constant δu, so its course from s to 1
+is again a cubic Hermite (its path plus a linear δx), bounded by _chord's chord and
+bulge: that course stays above the bed top, and clear by more than d of the course of each
+near partner that is not active (inactive or retired). An active partner needs no check:
+it looks at the pair at every sub-step, and if it touches a retired member (a grain
+deflected into it) it wakes it as it wakes an inactive one (_wake_up): forced again from
+that sub-step. A retired member keeps its kicks (by a zero force) and drift, so its
+position, velocity and deviation are those it would have had active: the same bits, only
+the force loop and the bed search are skipped. One that may not retire tries again
+RETIRE_BACKOFF = 8 sub-steps later (``ph.retire_backoff``; 0: never). The decisions read
+the partners' states, so they are made as _forces goes through the members one after
+another; on several threads (a block cut into lanes, below) no member retires.
+``counters[RETIRED_SUBSTEPS]`` counts the retired grain-sub-steps (summary.json "timing").
+At 3.94 % (reduced sweep case, after spin-up, 200 steps, one thread): 13.4 of 23.6 M
+grain-sub-steps retired; the sub-steps 4.33 → 3.80 µs per grain-step, the same end state
+bit for bit. (Retiring on two threads, decided after the parallel force pass, measured
+2.96 against 2.80 µs: slower.)
+
 Blocks on several threads. In the dense cases the near-bed layer is one giant group that
 no slack cuts (3.94 %: one or two blocks per step), so blocks are not what is shared
 between threads. Instead, on more than one thread (``soft_contact_phase(..., threads)``)
@@ -275,10 +298,12 @@ TOUCH_EPS = 1e-9  # relative safety of the join bounds against rounding (_first_
 LIST_ROOM = 0.1  # d: room kept in the skin for the sub-steps' deviations ("Neighbour list")
 NEAR_SLACK = 0.1  # d: deviation each grain of a pair may have before a far pair is looked at ("Near pairs")
 UNBLOCKED_STEPS = 16  # steps run as one block after the blocks came out as one giant block ("Blocks")
+RETIRE_BACKOFF = 8  # sub-steps before a member that could not retire tries again ("Retired members")
 PARALLEL_MEMBERS = 256  # candidates: a block this large runs its sub-steps on all threads
 MERGED_PASSES = 3  # passes redone with the conflicting groups joined before one that is a single block
 BC_MIN_JUMP_DURATION, BC_MIN_JUMP_HEIGHT = 7, 8  # slots of BedContext.params (bed/jumps.py)
 BED_SLOTS = 4  # bed spheres one grain can touch at once (3 in a hollow of the packed layer)
+ACTIVE, RETIRED, CLAIMED = 1, 2, 3  # SubstepSet.active: forced; unforced for the rest of the step; waking
 FREE = -1  # an empty bed-contact slot
 VIRTUAL = -2  # a slot holding a virtual bed grain
 
@@ -293,7 +318,8 @@ REDONE_UNBLOCKED = 6  # phases redone as one block
 REDONE_MERGED = 7  # phases redone with conflicting groups merged
 PARALLEL_BLOCKS = 8  # blocks whose sub-steps ran on several threads (soft_contact_phase)
 REDONE_FAR = 9  # phases redone without the near-pair filter (a far pair came near)
-N_COUNTERS = 10
+RETIRED_SUBSTEPS = 10  # grain-sub-steps of retired members (SUBSTEPPED counts them too; "Retired members")
+N_COUNTERS = 11
 
 # parts of soft_contact_phase whose wall time ContactPhase.clocks adds up (when profiling)
 CLOCK_LIST = 0  # reach of every path, neighbour-list rebuild
@@ -358,6 +384,7 @@ class ContactPhase(NamedTuple):
     #                          QUIET_SLACK), the same inside giant groups, giant group size (GIANT_*; "Blocks")
     parallel_members: np.ndarray  # (1,) int64 fewest candidates of a block run on all threads (PARALLEL_MEMBERS)
     near_slack: np.ndarray  # (1,) float64 σ (d) of the near-pair filter (NEAR_SLACK; inf: no filter)
+    retire_backoff: np.ndarray  # (1,) float64 RETIRE_BACKOFF (sub-steps; 0: members never retire)
     unblocked: np.ndarray  # (2,) int64 the phase runs as one block before step unblocked[0], set to
     #                        unblocked[1] (UNBLOCKED_STEPS; 0: never) steps on after one giant block ("Blocks")
     clocks: np.ndarray  # (N_CLOCKS,) s spent in each part (CLOCK_*), added up only when it has that
@@ -373,7 +400,7 @@ def make_contact_phase(n: int, block_members: int = BLOCK_MEMBERS,
         np.zeros(n), np.zeros(n), np.zeros(n), np.full(n, -1, np.int64), np.zeros(n), np.zeros(n, np.int64),
         np.zeros(n), np.zeros(N_COUNTERS, np.int64), np.array([block_members], np.int64),
         np.array([float(x) for x in block_slack]), np.array([PARALLEL_MEMBERS], np.int64),
-        np.array([NEAR_SLACK]), np.array([0, UNBLOCKED_STEPS], np.int64), np.zeros(N_CLOCKS if profile else 0),
+        np.array([NEAR_SLACK]), np.array([float(RETIRE_BACKOFF)]), np.array([0, UNBLOCKED_STEPS], np.int64), np.zeros(N_CLOCKS if profile else 0),
     )
 
 
@@ -392,7 +419,7 @@ class SubstepSet(NamedTuple):
     ft: np.ndarray  # (C, 6) contact force and torque at the last evaluation
     dev_max: np.ndarray  # (C,) largest |δx|² in this step
     start: np.ndarray  # (C,) earliest possible contact (inf: not a candidate)
-    active: np.ndarray  # (C,) uint8 sub-stepped from now on
+    active: np.ndarray  # (C,) uint8 sub-stepped from now on: 0 no, ACTIVE, RETIRED ("Retired members")
     wake: np.ndarray  # (C,) uint8 touched a member that was not active
     touched: np.ndarray  # (C,) uint8 had a contact in this step
     has_row: np.ndarray  # (C,) uint8
@@ -426,6 +453,8 @@ class SubstepSet(NamedTuple):
     nx: np.ndarray  # (R,) int64 flat indices of a row's near entries, in row order
     at: np.ndarray  # (C, 3) every member's position at the sub-step being evaluated (_at)
     image: np.ndarray  # (R, 3) periodic-image shift of row entry k for the step (_set_row)
+    retry: np.ndarray  # (C,) step fraction from which an active member may try to retire
+    retired: np.ndarray  # (1,) int64 grain-sub-steps of the block's members while retired
 
 
 # The set travels between kernels as a StructRef (grains/refs.py), made and grown only in
@@ -450,7 +479,7 @@ def _make_set(c, r):
         np.empty((c, BED_SLOTS, 3)), np.empty((c, BED_SLOTS, 3)), np.empty(c, np.uint8), np.empty(c, np.int64),
         np.empty((c, 3)), np.empty(c, np.int64), np.empty(c), np.empty(c), np.empty(c), np.empty(c, np.int64),
         np.empty(c, np.int64), np.empty(c, np.int64), np.empty(c, np.int64), np.empty(r, np.int64),
-        np.empty((c, 3)), np.empty((r, 3)),
+        np.empty((c, 3)), np.empty((r, 3)), np.empty(c), np.zeros(1, np.int64),
     )
 
 
@@ -496,7 +525,7 @@ def _grow(cs, c, r):
         _resized(cs.last_contact, c), _resized(cs.nrm, c), _resized(cs.impacts, c), _resized(cs.jump_t0, c),
         _resized(cs.jump_x0, c), _resized(cs.jump_ymax, c), _resized(cs.block, c), _resized(cs.jump_n0, c),
         _resized(cs.jump_c0, c), _resized(cs.nn, c), _resized(cs.nx, r), _resized(cs.at, c),
-        _resized(cs.image, r),
+        _resized(cs.image, r), _resized(cs.retry, c), cs.retired,
     )
 
 
@@ -612,8 +641,8 @@ def _grain_force(a, cs, model, s, dt, h, update, blk):
                 shear[k, 2] = 0.0
             continue
         _, _, _, vj0, vj1, vj2, wj0, wj1, wj2 = _state_of(cs, b, s, dt)
-        if active[b] == 0:
-            cs.wake[a] = 1
+        if active[b] != ACTIVE:
+            cs.wake[a] = 1  # b is not sub-stepped yet, or retired
         touching += 1
         if touch[k] == 0:
             touch[k] = 1
@@ -1084,24 +1113,98 @@ def _block_size(cs, lo, hi, app):
 
 
 @njit(cache=True, no_cfunc_wrapper=True, error_model="numpy", _nrt=False)
-def _forces(cs, st, bc, model, s, dt, h, lo, hi, app, blk, t0, t1):
+def _forces(cs, st, bc, model, s, dt, h, lo, hi, app, blk, t0, t1, backoff):
     """Forces on the active members t0..t1-1 of block blk (_block_member) at s; returns
     how many touched a member that was not active (to be woken). At s = 0 (the set-up)
     the tangential springs and contact records are not advanced: they hold the previous
     step's last sub-step. (``update`` is a run-time value, not a compile-time one: one
     compiled copy of the force code serves both.) Each member's force is its own sum over
-    its own row (both grains of a pair compute it): members can be done in any order."""
+    its own row (both grains of a pair compute it): members can be done in any order.
+    ``backoff`` > 0: then a member that touches nothing retires if it is sure to stay so
+    unforced (_may_retire), or tries again ``backoff`` sub-steps on. Returns how many were
+    woken and the sub-steps the retired members have left."""
     update = s > 0.0
     woke = 0
+    left = 0
     active = cs.active
     for t in range(t0, t1):
         a = _block_member(t, lo, hi, app)
-        if active[a] == 0:
+        if active[a] != ACTIVE:
             continue
         _grain_force(a, cs, model, s, dt, h, update, blk)
         _bed_force(a, cs, st, bc, s, dt, h, update)
         woke += cs.wake[a]
-    return woke
+        if backoff > 0.0 and update and s < 1.0 and s >= cs.retry[a] and cs.n_touch[a] == 0:
+            if _may_retire(cs, a, s, dt, model.diameter, blk):
+                active[a] = RETIRED
+                left += round((1.0 - s) * dt / h)
+            else:
+                cs.retry[a] = s + backoff * h / dt
+    return woke, left
+
+
+@njit(cache=True, no_cfunc_wrapper=True, inline="always", error_model="numpy", _nrt=False)
+def _rest_of_path(cs, b, s, dt, c):
+    """Member b's course along axis c over the rest of the step, s → 1, as a cubic Hermite
+    (x, u) → (x₁, u₁) over (1 − s)Δt: an inactive member's free-flight path; an active one
+    forced by nothing from s on moves on its path plus a deviation of constant velocity
+    δu, which adds δx + δu(σ − s)Δt to the cubic: another cubic through the shifted ends."""
+    p = cs.path
+    if cs.active[b] == 0:
+        x, u = _hermite(p[b, c], p[b, 9 + c], p[b, 3 + c], p[b, 12 + c], s, dt)
+        return x, u, p[b, 9 + c], p[b, 12 + c]
+    du = cs.dev[b, 3 + c]
+    return cs.cur[b, c], cs.cur[b, 3 + c], p[b, 9 + c] + cs.dev[b, c] + du * ((1.0 - s) * dt), p[b, 12 + c] + du
+
+
+@njit(cache=True, no_cfunc_wrapper=True, error_model="numpy", _nrt=False)
+def _may_retire(cs, a, s, dt, d, blk):
+    """Whether active member a, touching nothing at s, is sure to touch nothing for the
+    rest of the step if nothing forces it ("Retired members"): above the bed top all along
+    (the lowest point of its course by the chord and bulge of _chord, per axis), and its
+    course stays further than d from that of every near partner of its block that is not
+    active (inactive or retired). An active partner looks at the pair at every sub-step
+    and wakes a if they touch; one that comes later in _forces' order and retires at s too
+    sees a retired, so that pair is checked once. (So the members must be done one after
+    another: _forces retires none when its members are cut between threads.)"""
+    for c in range(6):
+        if cs.ft[a, c] != 0.0:
+            return False
+    for k in range(BED_SLOTS):
+        if cs.slot_id[a, k] != FREE:
+            return False
+    span = (1.0 - s) * dt
+    x, u, x1, u1 = _rest_of_path(cs, a, s, dt, 1)
+    m = (x1 - x) / span
+    # a grain whose centre is at or above 0.5 touches no bed sphere (_bed_force)
+    if min(x, x1) - (4.0 / 27.0) * span * (abs(u - m) + abs(u1 - m)) < 0.5 + TOUCH_EPS:
+        return False
+    active, nbr, nx, block, image = cs.active, cs.nbr, cs.nx, cs.block, cs.image
+    r0 = cs.rs[a]
+    lim = d * (1.0 + TOUCH_EPS)
+    for q in range(r0, r0 + cs.nn[a]):
+        k = nx[q]
+        b = nbr[k]
+        if block[b] != blk or active[b] == ACTIVE:
+            continue  # out of touch all step (_conflicts), or looks at a
+        r2 = 0.0
+        rd = 0.0
+        dd = 0.0
+        w0 = 0.0
+        w1 = 0.0
+        for c in range(3):  # _chord of the two courses
+            xa, ua, xa1, ua1 = _rest_of_path(cs, a, s, dt, c)
+            xb, ub, xb1, ub1 = _rest_of_path(cs, b, s, dt, c)
+            e = (xa - xb) - image[k, c]
+            dl = (xa1 - xa) - (xb1 - xb)
+            r2 += e * e
+            rd += e * dl
+            dd += dl * dl
+            w0 += (ua - ub - dl / span) ** 2
+            w1 += (ua1 - ub1 - dl / span) ** 2
+        if _chord_gap(r2, rd, dd, (4.0 / 27.0) * span * (math.sqrt(w0) + math.sqrt(w1))) <= lim:
+            return False
+    return True
 
 
 @njit(cache=True, no_cfunc_wrapper=True, inline="always", error_model="numpy", _nrt=False)
@@ -1179,7 +1282,8 @@ def _activate(cs, a, s, dt):
         cs.ft[a, c] = 0.0
     cs.dev_max[a] = 0.0
     _set_path(cs, a, s, dt)
-    cs.active[a] = 1
+    cs.active[a] = ACTIVE
+    cs.retry[a] = 0.0
 
 
 @njit(cache=True, no_cfunc_wrapper=True, error_model="numpy", _nrt=False)
@@ -1297,6 +1401,13 @@ def _path_gap(x0i, x1i, u0i, u1i, x0j, x1j, u0j, u1j, box, per, dt):
     step: the chord's closest approach less the bulge bound (_chord), less TOUCH_EPS (d)
     for rounding."""
     r2, rd, dd, bulge = _chord(x0i, x1i, u0i, u1i, x0j, x1j, u0j, u1j, box, per, dt)
+    return _chord_gap(r2, rd, dd, bulge)
+
+
+@njit(cache=True, no_cfunc_wrapper=True, inline="always", error_model="numpy")
+def _chord_gap(r2, rd, dd, bulge):
+    """The closest approach of a chord r₀ + sΔ, s ∈ [0, 1] (_chord's terms), less the
+    bulge and TOUCH_EPS (d)."""
     closest = r2
     if rd < 0.0:
         s = min(1.0, -rd / dd)
@@ -1589,6 +1700,7 @@ def _wake_up(cs, x0w, st, bc, model, cl, ph, s, dt, h, lo, hi, app, blk):
     d2 = model.diameter * model.diameter
     q_lo = 0
     q_hi = 0
+    recalled = 0  # retired members forced again (already counted as active)
     first_round = True
     while True:
         # members flagged in this round: all active ones of the block at first, then the
@@ -1605,14 +1717,15 @@ def _wake_up(cs, x0w, st, bc, model, cl, ph, s, dt, h, lo, hi, app, blk):
             cs.wake[a] = 0
             for k in range(cs.rs[a], cs.rs[a] + cs.rc[a]):
                 b = cs.nbr[k]
-                if cs.active[b] != 0 or cs.block[b] != blk:
+                if cs.active[b] == ACTIVE or cs.active[b] == CLAIMED or cs.block[b] != blk:
                     continue
                 xj, yj, zj = _position_of(cs, b, s, dt)
                 dxx = min_image(cs.cur[a, 0] - xj, box[0], per[0])
                 dyy = min_image(cs.cur[a, 1] - yj, box[1], per[1])
                 dzz = min_image(cs.cur[a, 2] - zj, box[2], per[2])
                 if dxx * dxx + dyy * dyy + dzz * dzz < d2:
-                    cs.active[b] = 1  # claimed: activated below
+                    # claimed: activated below (a retired one is forced again)
+                    cs.active[b] = CLAIMED if cs.active[b] == RETIRED else ACTIVE
                     cs.queue[q_new] = b
                     q_new += 1
         first_round = False
@@ -1621,6 +1734,12 @@ def _wake_up(cs, x0w, st, bc, model, cl, ph, s, dt, h, lo, hi, app, blk):
         n_before = cs.n[0]
         for t in range(q_hi, q_new):
             b = cs.queue[t]
+            if cs.active[b] == CLAIMED:
+                cs.active[b] = ACTIVE  # its deviation went on unforced, as when forced by nothing
+                cs.retry[b] = s + ph.retire_backoff[0] * h / dt
+                cs.retired[0] -= round((1.0 - s) * dt / h)  # the sub-steps it had left
+                recalled += 1
+                continue
             if cs.has_row[b] == 0:
                 cs = _give_row(cs, b, x0w, st, cl, bc, ph)
             cs.active[b] = 0
@@ -1633,10 +1752,10 @@ def _wake_up(cs, x0w, st, bc, model, cl, ph, s, dt, h, lo, hi, app, blk):
             # b alone (as members b..b and none appended): the compiled _forces, not a
             # second inlined copy of the force code (wake-ups are rare)
             b = v.queue[t]
-            _forces(v, sv, bv, model, s, dt, h, b, b + 1, v.n[0], blk, np.int64(0), np.int64(1))
+            _forces(v, sv, bv, model, s, dt, h, b, b + 1, v.n[0], blk, np.int64(0), np.int64(1), 0.0)
         q_lo = q_hi
         q_hi = q_new
-    return cs, q_hi
+    return cs, q_hi - recalled
 
 
 # the parts of a sub-step (_substep_part); KICK_KICK_DRIFT: the previous sub-step's second
@@ -1649,7 +1768,9 @@ def _substep_part(part, cs, st, bc, model, s, dt, h, lo, hi, app, blk, lanes, wo
     """One part of a sub-step of a large block (KICK_DRIFT, FORCES, KICK or
     KICK_KICK_DRIFT), its members cut into ``lanes`` contiguous ranges done in parallel.
     Every member's arithmetic is its own (_forces), so the result is that of one thread,
-    bit for bit. Returns the count of _forces (FORCES), else 0."""
+    bit for bit. Returns the count of _forces (FORCES), else 0. No member retires here
+    (_may_retire needs the members one after another; on two threads retiring them
+    afterwards, one after another, measured slower, not faster)."""
     m = _block_size(cs, lo, hi, app)
     for q in prange(lanes):
         t0 = np.int64(q) * m // lanes
@@ -1659,7 +1780,7 @@ def _substep_part(part, cs, st, bc, model, s, dt, h, lo, hi, app, blk, lanes, wo
             _kick_drift(v, model, s, dt, h, lo, hi, app, t0, t1, part == KICK_KICK_DRIFT)
         elif part == FORCES:
             woke[q] = _forces(v, as_tuple(st, GrainState), as_tuple(bc, BedContext), model, s, dt, h,
-                              lo, hi, app, blk, t0, t1)
+                              lo, hi, app, blk, t0, t1, 0.0)[0]
         else:
             _kick(v, model, h, lo, hi, app, t0, t1)
     return woke[:lanes].sum() if part == FORCES else 0
@@ -1673,6 +1794,8 @@ def _run_block(cs, cand, c0, c1, lo, hi, blk, x0w, st, bc, model, cl, ph, dt, n_
     wake-ups stay serial. Returns the set, the grain-sub-steps done and the grains woken."""
     h = dt / n_sub
     app = cs.n[0]
+    backoff = ph.retire_backoff[0]
+    cs.retired[0] = 0
     n_act = 0  # active members of the block
     done = 0
     woken = 0
@@ -1686,7 +1809,7 @@ def _run_block(cs, cand, c0, c1, lo, hi, blk, x0w, st, bc, model, cl, ph, dt, n_
     ptr, joined = _join(v, cand, c0, c1, 0.0, 0.0, dt)
     n_act += joined
     _positions(v, 0.0, dt, lo, hi, app, first, _block_size(v, lo, hi, app))
-    if _forces(v, sv, bv, model, 0.0, dt, h, lo, hi, app, blk, first, _block_size(v, lo, hi, app)) > 0:
+    if _forces(v, sv, bv, model, 0.0, dt, h, lo, hi, app, blk, first, _block_size(v, lo, hi, app), 0.0)[0] > 0:
         cs, k_w = _wake_up(cs, x0w, st, bc, model, cl, ph, 0.0, dt, h, lo, hi, app, blk)
         n_act += k_w
         woken += k_w
@@ -1707,7 +1830,8 @@ def _run_block(cs, cand, c0, c1, lo, hi, blk, x0w, st, bc, model, cl, ph, dt, n_
         else:
             m = _block_size(v, lo, hi, app)
             _kick_drift(v, model, s_next, dt, h, lo, hi, app, first, m, k > 0)
-            n_woke = _forces(v, sv, bv, model, s_next, dt, h, lo, hi, app, blk, first, m)
+            n_woke, left = _forces(v, sv, bv, model, s_next, dt, h, lo, hi, app, blk, first, m, backoff)
+            cs.retired[0] += left
         if n_woke > 0:
             cs, k_w = _wake_up(cs, x0w, st, bc, model, cl, ph, s_next, dt, h, lo, hi, app, blk)
             n_act += k_w
@@ -1929,7 +2053,7 @@ def soft_contact_phase(state, x0w, model, cl, phase, bed, t0, step, dt, n_sub, c
     # time they may first touch something (docstring: who is sub-stepped)
     d = model.diameter
     box, per = lst.grid.box, lst.grid.periodic
-    wakes0, done0 = ph.counters[WAKES], ph.counters[SUBSTEPPED]
+    wakes0, done0, retired0 = ph.counters[WAKES], ph.counters[SUBSTEPPED], ph.counters[RETIRED_SUBSTEPS]
     forced = np.empty(0, np.int64)  # groups joined after a failed pass (_conflicts)
     passes = 0
     filtered = ph.near_slack[0] < np.inf  # far pairs not looked at ("Near pairs")
@@ -1949,6 +2073,7 @@ def soft_contact_phase(state, x0w, model, cl, phase, bed, t0, step, dt, n_sub, c
             cs, done, woken = _run_block(cs, cand, c0, c1, mstart[b], mstart[b + 1], b, x0w, st, bc, model, lst,
                                          ph, dt, n_sub, lanes)
             ph.counters[SUBSTEPPED] += done
+            ph.counters[RETIRED_SUBSTEPS] += cs.retired[0]
             ph.counters[WAKES] += woken
             if lanes > 1:
                 ph.counters[PARALLEL_BLOCKS] += 1
@@ -1979,6 +2104,7 @@ def soft_contact_phase(state, x0w, model, cl, phase, bed, t0, step, dt, n_sub, c
         _release(cs, st, ph)
         ph.counters[WAKES] = wakes0
         ph.counters[SUBSTEPPED] = done0
+        ph.counters[RETIRED_SUBSTEPS] = retired0
         tic = _lap(ph, CLOCK_CONFLICTS, tic)
     over = _scatter(cs, st, lst, bc, ph, skin_half)
     if over > 0:

@@ -354,6 +354,11 @@ class Stepper:
             out["redone_unfiltered_is"] = ("contact phases redone without the near-pair filter because a pair it "
                                            "had not looked at came near (contacts/phase.py, \"Near pairs\"); the "
                                            "result is the same either way")
+            out["contact_substeps_retired"] = int(self.ph.counters[phase.RETIRED_SUBSTEPS])
+            out["substeps_retired_are"] = ("grain-sub-steps (of substepped_grain_substeps) of grains that touched "
+                                           "nothing and were sure to stay so unforced: moved on without looking for "
+                                           "contacts (contacts/phase.py, \"Retired members\"); the result is the "
+                                           "same either way")
         return out
 
     # ---------------------------------------------------------------- checkpoints
