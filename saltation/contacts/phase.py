@@ -236,8 +236,9 @@ another; on several threads (a block cut into lanes, below) no member retires.
 ``counters[RETIRED_SUBSTEPS]`` counts the retired grain-sub-steps (summary.json "timing").
 At 3.94 % (reduced sweep case, after spin-up, 200 steps, one thread): 13.4 of 23.6 M
 grain-sub-steps retired; the sub-steps 4.33 → 3.80 µs per grain-step, the same end state
-bit for bit. (Retiring on two threads, decided after the parallel force pass, measured
-2.96 against 2.80 µs: slower.)
+bit for bit. Retiring on two threads measured slower: 3.45 µs decided one member after
+another after the parallel force pass, 3.00 decided in the lanes (partners in other lanes
+checked by their courses), against 2.75–2.83 without.
 
 Blocks on several threads. In the dense cases the near-bed layer is one giant group that
 no slack cuts (3.94 %: one or two blocks per step), so blocks are not what is shared
@@ -400,7 +401,8 @@ def make_contact_phase(n: int, block_members: int = BLOCK_MEMBERS,
         np.zeros(n), np.zeros(n), np.zeros(n), np.full(n, -1, np.int64), np.zeros(n), np.zeros(n, np.int64),
         np.zeros(n), np.zeros(N_COUNTERS, np.int64), np.array([block_members], np.int64),
         np.array([float(x) for x in block_slack]), np.array([PARALLEL_MEMBERS], np.int64),
-        np.array([NEAR_SLACK]), np.array([float(RETIRE_BACKOFF)]), np.array([0, UNBLOCKED_STEPS], np.int64), np.zeros(N_CLOCKS if profile else 0),
+        np.array([NEAR_SLACK]), np.array([float(RETIRE_BACKOFF)]), np.array([0, UNBLOCKED_STEPS], np.int64),
+        np.zeros(N_CLOCKS if profile else 0),
     )
 
 
@@ -1121,8 +1123,9 @@ def _forces(cs, st, bc, model, s, dt, h, lo, hi, app, blk, t0, t1, backoff):
     compiled copy of the force code serves both.) Each member's force is its own sum over
     its own row (both grains of a pair compute it): members can be done in any order.
     ``backoff`` > 0: then a member that touches nothing retires if it is sure to stay so
-    unforced (_may_retire), or tries again ``backoff`` sub-steps on. Returns how many were
-    woken and the sub-steps the retired members have left."""
+    unforced (_may_retire, which needs the members one after another: which ones retire
+    depends on their order, the result does not), or tries again ``backoff`` sub-steps on.
+    Returns how many were woken and the sub-steps the retired members have left."""
     update = s > 0.0
     woke = 0
     left = 0
