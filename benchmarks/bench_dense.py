@@ -256,7 +256,7 @@ def one_concentration(args) -> dict:
     import numpy as np
 
     from saltation.case.schema import load_case, resolve_domain
-    from saltation.contacts.phase import CLOCK_NAMES, CLOCK_SUBSTEPS, N_CLOCKS, SUBSTEPPED
+    from saltation.contacts.phase import CLOCK_NAMES, CLOCK_SUBSTEPS, N_CLOCKS, RETIRED_SUBSTEPS, SUBSTEPPED
     from saltation.engine.simulation import Simulation, _les_box_m, open_flow
     from saltation.flight.spheres import make_workspace
 
@@ -364,6 +364,7 @@ def one_concentration(args) -> dict:
             "free_flight_us": 1e6 * ff / gs, "contacts_us": 1e6 * pc / gs, "bed_us": 1e6 * bd / gs,
             "other_us": 1e6 * (wall - ff - pc - bd) / gs,
             "contacts_s": pc, "substeps_done": sub, "substep_share": sub / (gs * n_sub),
+            "retired_share": float(dc[RETIRED_SUBSTEPS]) / sub if sub else 0.0,
             "contacts_ns_per_substep_done": 1e9 * pc / sub if sub else None,
             "contacts_ns_per_grain_substep": 1e9 * pc / (gs * n_sub),
             "list_rebuilds": int(dc[0]), "overruns": int(dc[1]), "wakes": int(dc[2]), "missed": int(dc[4]),
@@ -489,7 +490,8 @@ def print_table(rows, args):
     print(f"\nCases of {Path(args.cases).name}, tau*/tau*c = {args.tau_ratio}, spin-up {args.spinup} s simulated, "
           f"{args.steps} timed steps; times in us per grain-step")
     head = (f"{'C %':>5} {'N':>5} {'thr':>3} {'g-steps/s':>10} {'us/g-st':>8} {'free fl.':>8} {'contacts':>8} "
-            f"{'bed':>6} {'n_sub':>5} {'engaged':>7} {'sub-sh.':>7} {'ns/sub':>7} {'cpu/wall':>8} {'load':>5}")
+            f"{'bed':>6} {'n_sub':>5} {'engaged':>7} {'sub-sh.':>7} {'retired':>7} {'ns/sub':>7} {'cpu/wall':>8} "
+            f"{'load':>5}")
     print(head + "\n" + "-" * len(head))
     for r in rows:
         if "error" in r:
@@ -499,10 +501,12 @@ def print_table(rows, args):
             print(f"{r['concentration_pct']:>5.2f} {r['n']:>5d} {th:>3} {x['grain_steps_per_s']:>10.4g} "
                   f"{x['us_per_grain_step']:>8.3f} {x['free_flight_us']:>8.3f} {x['contacts_us']:>8.3f} "
                   f"{x['bed_us']:>6.3f} {r['substeps_per_step']:>5d} {100 * r['engaged_fraction']:>6.1f}% "
-                  f"{100 * x['substep_share']:>6.1f}% {x['contacts_ns_per_substep_done'] or 0.0:>7.0f} "
+                  f"{100 * x['substep_share']:>6.1f}% {100 * x['retired_share']:>6.1f}% "
+                  f"{x['contacts_ns_per_substep_done'] or 0.0:>7.0f} "
                   f"{x['cpu_per_wall']:>8.2f} {x['load_avg_1min']:>5.2f}")
-    print("engaged: grains sub-stepped in a step / N; sub-sh.: grain-sub-steps done / (N n_sub); ns/sub: contact "
-          "phase per grain-sub-step done")
+    print("engaged: grains sub-stepped in a step / N; sub-sh.: grain-sub-steps done / (N n_sub); retired: share of "
+          "those done retired (no contact looked for, contacts/phase.py \"Retired members\"; none on several threads); "
+          "ns/sub: contact phase per grain-sub-step done")
     print("\nThe contact phase by part, us per grain-step (contacts/phase.py CLOCK_*; sub-steps also in ns per "
           "grain-sub-step done)")
     timed = [(r, th, x) for r in rows for th, x in r.get("runs", {}).items() if "contact_parts_us" in x]
