@@ -505,7 +505,7 @@ def print_table(rows, args):
                   f"{x['contacts_ns_per_substep_done'] or 0.0:>7.0f} "
                   f"{x['cpu_per_wall']:>8.2f} {x['load_avg_1min']:>5.2f}")
     print("engaged: grains sub-stepped in a step / N; sub-sh.: grain-sub-steps done / (N n_sub); retired: share of "
-          "those done retired (no contact looked for, contacts/phase.py \"Retired members\"; none on several threads); "
+          "those done retired (no contact looked for, contacts/phase.py \"Retired members\"; none in a block cut between threads); "
           "ns/sub: contact phase per grain-sub-step done")
     print("\nThe contact phase by part, us per grain-step (contacts/phase.py CLOCK_*; sub-steps also in ns per "
           "grain-sub-step done)")
