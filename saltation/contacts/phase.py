@@ -917,10 +917,15 @@ def _engage(x0w, pos, vel, dt, model, cl, ph, bc, c0):
 def _first_bed(x0w, pos, vel, dt, i):
     """Lower bound on the step fraction s at which grain i's bottom can first go below the
     bed top (y < 1/2; inf: not in this step), by the bound of _chord on its cubic."""
-    y0 = x0w[i, 1]
-    y1 = pos[i, 1]
+    return _bed_time(x0w[i, 1], pos[i, 1], x0w[i, 4], vel[i, 1], dt)
+
+
+@njit(cache=True, no_cfunc_wrapper=True, inline="always", error_model="numpy")
+def _bed_time(y0, y1, u0, u1, dt):
+    """_first_bed of a cubic Hermite (y0, u0) → (y1, u1) over dt: the fraction of dt before
+    which its height stays above 1/2 (inf: all along)."""
     vbar = (y1 - y0) / dt
-    low = y0 - 0.5 * (1.0 + TOUCH_EPS) - (4.0 / 27.0) * dt * (abs(x0w[i, 4] - vbar) + abs(vel[i, 1] - vbar))
+    low = y0 - 0.5 * (1.0 + TOUCH_EPS) - (4.0 / 27.0) * dt * (abs(u0 - vbar) + abs(u1 - vbar))
     if low <= 0.0:
         return 0.0
     if y1 >= y0:
@@ -1177,10 +1182,9 @@ def _may_retire(cs, a, s, dt, d, blk):
         if cs.slot_id[a, k] != FREE:
             return False
     span = (1.0 - s) * dt
-    x, u, x1, u1 = _rest_of_path(cs, a, s, dt, 1)
-    m = (x1 - x) / span
     # a grain whose centre is at or above 0.5 touches no bed sphere (_bed_force)
-    if min(x, x1) - (4.0 / 27.0) * span * (abs(u - m) + abs(u1 - m)) < 0.5 + TOUCH_EPS:
+    y, v, y1, v1 = _rest_of_path(cs, a, s, dt, 1)
+    if _bed_time(y, y1, v, v1, span) <= 1.0:
         return False
     active, nbr, nx, block, image = cs.active, cs.nbr, cs.nx, cs.block, cs.image
     r0 = cs.rs[a]
@@ -1190,22 +1194,13 @@ def _may_retire(cs, a, s, dt, d, blk):
         b = nbr[k]
         if block[b] != blk or active[b] == ACTIVE:
             continue  # out of touch all step (_conflicts), or looks at a
-        r2 = 0.0
-        rd = 0.0
-        dd = 0.0
-        w0 = 0.0
-        w1 = 0.0
+        r2 = rd = dd = w0 = w1 = 0.0
         for c in range(3):  # _chord of the two courses
             xa, ua, xa1, ua1 = _rest_of_path(cs, a, s, dt, c)
             xb, ub, xb1, ub1 = _rest_of_path(cs, b, s, dt, c)
-            e = (xa - xb) - image[k, c]
-            dl = (xa1 - xa) - (xb1 - xb)
-            r2 += e * e
-            rd += e * dl
-            dd += dl * dl
-            w0 += (ua - ub - dl / span) ** 2
-            w1 += (ua1 - ub1 - dl / span) ** 2
-        if _chord_gap(r2, rd, dd, (4.0 / 27.0) * span * (math.sqrt(w0) + math.sqrt(w1))) <= lim:
+            r2, rd, dd, w0, w1 = _chord_add(r2, rd, dd, w0, w1, (xa - xb) - image[k, c], (xa1 - xa) - (xb1 - xb),
+                                            ua - ub, ua1 - ub1, span)
+        if _chord_gap(r2, rd, dd, _bulge(w0, w1, span)) <= lim:
             return False
     return True
 
@@ -1382,20 +1377,24 @@ def _chord(x0i, x1i, u0i, u1i, x0j, x1j, u0j, u1j, box, per, dt):
     ū = Δx/Δt and |h₁₀|, |h₁₁| ≤ 4/27 on [0, 1], so for the pair r(s) = H_i − H_j:
     |r(s) − (r₀ + sΔ)| ≤ B = (4/27)Δt(|w₀| + |w₁|), Δ = Δx_i − Δx_j, w = the relative
     velocity less Δ/Δt. Returns |r₀|², r₀·Δ, |Δ|², B."""
-    r2 = 0.0
-    rd = 0.0
-    dd = 0.0
-    w0 = 0.0
-    w1 = 0.0
+    r2 = rd = dd = w0 = w1 = 0.0
     for c in range(3):
-        e = min_image(x0i[c] - x0j[c], box[c], per[c])
-        dl = (x1i[c] - x0i[c]) - (x1j[c] - x0j[c])
-        r2 += e * e
-        rd += e * dl
-        dd += dl * dl
-        w0 += (u0i[c] - u0j[c] - dl / dt) ** 2
-        w1 += (u1i[c] - u1j[c] - dl / dt) ** 2
-    return r2, rd, dd, (4.0 / 27.0) * dt * (math.sqrt(w0) + math.sqrt(w1))
+        r2, rd, dd, w0, w1 = _chord_add(r2, rd, dd, w0, w1, min_image(x0i[c] - x0j[c], box[c], per[c]),
+                                        (x1i[c] - x0i[c]) - (x1j[c] - x0j[c]), u0i[c] - u0j[c], u1i[c] - u1j[c], dt)
+    return r2, rd, dd, _bulge(w0, w1, dt)
+
+
+@njit(cache=True, no_cfunc_wrapper=True, inline="always", error_model="numpy")
+def _chord_add(r2, rd, dd, w0, w1, e, dl, du0, du1, dt):
+    """_chord's sums with one axis added: e of r₀, dl of Δ, du0 and du1 of the relative
+    velocity at the two ends."""
+    return r2 + e * e, rd + e * dl, dd + dl * dl, w0 + (du0 - dl / dt) ** 2, w1 + (du1 - dl / dt) ** 2
+
+
+@njit(cache=True, no_cfunc_wrapper=True, inline="always", error_model="numpy")
+def _bulge(w0, w1, dt):
+    """_chord's bound B = (4/27)Δt(|w₀| + |w₁|) from the squares of |w₀|, |w₁|."""
+    return (4.0 / 27.0) * dt * (math.sqrt(w0) + math.sqrt(w1))
 
 
 @njit(cache=True, no_cfunc_wrapper=True, inline="always", error_model="numpy")
