@@ -217,28 +217,33 @@ spin-up, 100 steps, one thread): the contact phase 10.45 s without the filter, 8
 70 redone.
 
 Retired members. At 3.94 % more than half of the active grain-sub-steps come after the
-grain's last contact in the step (it left the bed layer, or a neighbour): each still looks
-at its row and the bed at every sub-step and finds nothing. So an active member that
-touches nothing at s (no pair, no bed sphere: zero force) *retires* (``active`` = RETIRED)
-when nothing can touch it for the rest of the step unless something else is deflected into
-it (_may_retire). Unforced, its deviation moves at constant δu, so its course from s to 1
-is again a cubic Hermite (its path plus a linear δx), bounded by _chord's chord and
-bulge: that course stays above the bed top, and clear by more than d of the course of each
-near partner that is not active (inactive or retired). An active partner needs no check:
-it looks at the pair at every sub-step, and if it touches a retired member (a grain
-deflected into it) it wakes it as it wakes an inactive one (_wake_up): forced again from
-that sub-step. A retired member keeps its kicks (by a zero force) and drift, so its
-position, velocity and deviation are those it would have had active: the same bits, only
-the force loop and the bed search are skipped. One that may not retire tries again
-RETIRE_BACKOFF = 8 sub-steps later (``ph.retire_backoff``; 0: never). The decisions read
-the partners' states, so they are made as _forces goes through the members one after
-another; on several threads (a block cut into lanes, below) no member retires.
+grain's last contact in the step (it left the bed layer, or a neighbour), or before its
+next one: each still looks at its row and the bed at every sub-step and finds nothing. So
+an active member that touches nothing at s (no pair, no bed sphere: zero force) *retires*
+(``active`` = RETIRED) until the earliest time anything can touch it unless something else
+is deflected into it (_quiet_until; ``retry`` holds that time, > 1: the rest of the step).
+Unforced, its deviation moves at constant δu, so its course from s to 1 is again a cubic
+Hermite (its path plus a linear δx), bounded by _chord's chord and bulge: the time is the
+earlier of when that course can reach the bed top (_bed_time) and when it can come within
+d of the course of a near partner that is not active (inactive or retired; _chord_touch,
+the bound by which a candidate joins). It is forced again from the first sub-step at or
+after that time (_kick_drift), and only if that is at least QUIET_MIN = 2 sub-steps away
+does it retire at all. An active partner needs no check: it looks at the pair at every
+sub-step, and if it touches a retired member (a grain deflected into it) it wakes it as it
+wakes an inactive one (_wake_up): forced again from that sub-step. A retired member keeps
+its kicks (by a zero force) and drift, so its position, velocity and deviation are those
+it would have had active: the same bits, only the force loop and the bed search are
+skipped. One that may not retire tries again RETIRE_BACKOFF = 8 sub-steps later
+(``ph.retire_backoff``; 0: never), as does one forced again when its time is up. The
+decisions read the partners' states, so they are made as _forces goes through the members
+one after another; on several threads (a block cut into lanes, below) no member retires.
 ``counters[RETIRED_SUBSTEPS]`` counts the retired grain-sub-steps (summary.json "timing").
-At 3.94 % (reduced sweep case, after spin-up, 200 steps, one thread): 13.4 of 23.6 M
-grain-sub-steps retired; the sub-steps 4.33 → 3.80 µs per grain-step, the same end state
-bit for bit. Retiring on two threads measured slower: 3.45 µs decided one member after
-another after the parallel force pass, 3.00 decided in the lanes (partners in other lanes
-checked by their courses), against 2.75–2.83 without.
+At 3.94 % (reduced sweep case, after spin-up, 200 steps, one thread): retired for the rest
+of the step only, 13.4 of 23.6 M grain-sub-steps retired, the sub-steps 4.33 → 3.80 µs per
+grain-step; retired until a time, 15.4 M, and (with the lists below) 3.24–3.26 → 3.06–3.11;
+the same end state bit for bit. Retiring on two threads measured slower: 3.45 µs decided
+one member after another after the parallel force pass, 3.00 decided in the lanes
+(partners in other lanes checked by their courses), against 2.75–2.83 without.
 
 Lists instead of scans. In the dense layer a block holds ~2 750 members, of which ~400 are
 forced at a sub-step, ~500 retired and the rest not sub-stepped (their ``at`` only): a
@@ -315,6 +320,7 @@ LIST_ROOM = 0.1  # d: room kept in the skin for the sub-steps' deviations ("Neig
 NEAR_SLACK = 0.1  # d: deviation each grain of a pair may have before a far pair is looked at ("Near pairs")
 UNBLOCKED_STEPS = 16  # steps run as one block after the blocks came out as one giant block ("Blocks")
 RETIRE_BACKOFF = 8  # sub-steps before a member that could not retire tries again ("Retired members")
+QUIET_MIN = 2  # sub-steps: the least quiet time worth retiring a member for
 PARALLEL_MEMBERS = 256  # candidates: a block this large runs its sub-steps on all threads
 MERGED_PASSES = 3  # passes redone with the conflicting groups joined before one that is a single block
 BC_MIN_JUMP_DURATION, BC_MIN_JUMP_HEIGHT = 7, 8  # slots of BedContext.params (bed/jumps.py)
@@ -470,7 +476,7 @@ class SubstepSet(NamedTuple):
     nx: np.ndarray  # (R,) int64 flat indices of a row's near entries, in row order
     at: np.ndarray  # (C, 3) every member's position at the sub-step being evaluated (_at)
     image: np.ndarray  # (R, 3) periodic-image shift of row entry k for the step (_set_row)
-    retry: np.ndarray  # (C,) step fraction from which an active member may try to retire
+    retry: np.ndarray  # (C,) step fraction from which an active member may try to retire; a retired one is forced again
     flagged: np.ndarray  # (C,) int64 scratch: members that touched one not active, in _forces' order
     go: np.ndarray  # (C,) int64 scratch: the active members of the sub-step, in member order (_kick_drift)
     retired: np.ndarray  # (1,) int64 grain-sub-steps of the block's members while retired
@@ -1146,8 +1152,8 @@ def _forces(cs, st, bc, model, s, dt, h, lo, hi, app, blk, t0, t1, backoff, list
     compiled copy of the force code serves both.) Each member's force is its own sum over
     its own row (both grains of a pair compute it): members can be done in any order.
     The members that touched one not active are listed in cs.flagged[t0:], in this order.
-    ``backoff`` > 0: then a member that touches nothing retires if it is sure to stay so
-    unforced (_may_retire, which needs the members one after another: which ones retire
+    ``backoff`` > 0: then a member that touches nothing retires until it may touch
+    something unforced (_quiet_until, which needs the members one after another: which ones retire
     depends on their order, the result does not), or tries again ``backoff`` sub-steps on.
     Returns how many were woken and the sub-steps the retired members have left."""
     update = s > 0.0
@@ -1164,8 +1170,10 @@ def _forces(cs, st, bc, model, s, dt, h, lo, hi, app, blk, t0, t1, backoff, list
             cs.flagged[t0 + woke] = a  # for _wake_up; each range t0..t1-1 writes its own part
             woke += 1
         if backoff > 0.0 and update and s < 1.0 and s >= cs.retry[a] and cs.n_touch[a] == 0:
-            if _may_retire(cs, a, s, dt, model.diameter, blk):
+            until = _quiet_until(cs, a, s, dt, h, model.diameter, blk)
+            if until > s:
                 active[a] = RETIRED
+                cs.retry[a] = until  # forced again from the first sub-step at or after it
                 left += round((1.0 - s) * dt / h)
             else:
                 cs.retry[a] = s + backoff * h / dt
@@ -1187,29 +1195,31 @@ def _rest_of_path(cs, b, s, dt, c):
 
 
 @njit(cache=True, no_cfunc_wrapper=True, error_model="numpy", _nrt=False)
-def _may_retire(cs, a, s, dt, d, blk):
-    """Whether active member a, touching nothing at s, is sure to touch nothing for the
-    rest of the step if nothing forces it ("Retired members"): above the bed top all along
-    (the lowest point of its course by the chord and bulge of _chord, per axis), and its
-    course stays further than d from that of every near partner of its block that is not
-    active (inactive or retired). An active partner looks at the pair at every sub-step
-    and wakes a if they touch; one that comes later in _forces' order and retires at s too
-    sees a retired, so that pair is checked once. (So the members must be done one after
-    another: _forces retires none when its members are cut between threads.)"""
+def _quiet_until(cs, a, s, dt, h, d, blk):
+    """The step fraction up to which active member a, touching nothing at s, is sure to
+    touch nothing if nothing forces it ("Retired members"; 0: not even QUIET_MIN
+    sub-steps on; > 1: the whole step): before its course can reach the bed top (_bed_time)
+    or come within d of the course of a near partner of its block that is not active
+    (inactive or retired; _chord_touch). An active partner looks at the pair at every
+    sub-step and wakes a if they touch; one that comes later in _forces' order and
+    retires at s too sees a retired, so that pair is checked once. (So the members must
+    be done one after another: _forces retires none when its members are cut between
+    threads.)"""
     for c in range(6):
         if cs.ft[a, c] != 0.0:
-            return False
+            return 0.0
     for k in range(BED_SLOTS):
         if cs.slot_id[a, k] != FREE:
-            return False
+            return 0.0
     span = (1.0 - s) * dt
     # a grain whose centre is at or above 0.5 touches no bed sphere (_bed_force)
     y, v, y1, v1 = _rest_of_path(cs, a, s, dt, 1)
-    if _bed_time(y, y1, v, v1, span) <= 1.0:
-        return False
+    first = _bed_time(y, y1, v, v1, span)  # fractions of the rest of the step, s → 1
+    least = QUIET_MIN * h / span
+    if first <= least:
+        return 0.0
     active, nbr, nx, block, image = cs.active, cs.nbr, cs.nx, cs.block, cs.image
     r0 = cs.rs[a]
-    lim = d * (1.0 + TOUCH_EPS)
     for q in range(r0, r0 + cs.nn[a]):
         k = nx[q]
         b = nbr[k]
@@ -1221,9 +1231,10 @@ def _may_retire(cs, a, s, dt, d, blk):
             xb, ub, xb1, ub1 = _rest_of_path(cs, b, s, dt, c)
             r2, rd, dd, w0, w1 = _chord_add(r2, rd, dd, w0, w1, (xa - xb) - image[k, c], (xa1 - xa) - (xb1 - xb),
                                             ua - ub, ua1 - ub1, span)
-        if _chord_gap(r2, rd, dd, _bulge(w0, w1, span)) <= lim:
-            return False
-    return True
+        first = min(first, _chord_touch(r2, rd, dd, _bulge(w0, w1, span), d))
+        if first <= least:
+            return 0.0
+    return s + first * (1.0 - s)
 
 
 @njit(cache=True, no_cfunc_wrapper=True, inline="always", error_model="numpy", _nrt=False)
@@ -1235,14 +1246,16 @@ def _half_kick(dev, ft, a, h, inv_m, inv_i):
 
 
 @njit(cache=True, no_cfunc_wrapper=True, error_model="numpy", _nrt=False)
-def _kick_drift(cs, model, s_next, dt, h, lo, hi, app, t0, t1, kick_first, listing):
+def _kick_drift(cs, model, s_next, dt, h, lo, hi, app, t0, t1, kick_first, listing, backoff):
     """First half of a sub-step for the active members t0..t1-1 of a block: half kick,
     drift (in member order: sequential memory); the others' position ``at``. The forces at
     s_next follow (_forces), once every member has drifted. ``kick_first``: the previous
     sub-step's second half kick first, in the same pass (the operations of _kick, in its
     order; a member that joined since has zero force, so that kick adds exactly zero).
     ``listing``: also list the members forced at s_next (ACTIVE) in cs.go, in member
-    order, for _forces ("Lists instead of scans"); returns how many (else 0)."""
+    order, for _forces ("Lists instead of scans"); returns how many (else 0). A retired
+    member whose quiet time ends by s_next is forced again (it may try to retire again
+    ``backoff`` sub-steps on)."""
     inv_m = 1.0 / model.mass
     inv_i = 1.0 / model.inertia
     active, dev, ft, dev_max, go = cs.active, cs.dev, cs.ft, cs.dev_max, cs.go
@@ -1263,6 +1276,10 @@ def _kick_drift(cs, model, s_next, dt, h, lo, hi, app, t0, t1, kick_first, listi
         _set_path(cs, a, s_next, dt)
         _at(cs, a, s_next, dt)
         if listing:
+            if active[a] == RETIRED and s_next >= cs.retry[a]:
+                active[a] = ACTIVE  # its quiet time is over (_quiet_until): it looks again
+                cs.retired[0] -= round((1.0 - s_next) * dt / h)
+                cs.retry[a] = s_next + backoff * h / dt
             go[n_go] = a
             n_go += active[a] == ACTIVE
     return n_go
@@ -1451,6 +1468,14 @@ def _first_touch(x0i, x1i, u0i, u1i, x0j, x1j, u0j, u1j, box, per, dt, d):
     come within d (inf: not in this step): the chord r₀ + sΔ first within d + B (_chord),
     the smaller root of a quadratic."""
     r2, rd, dd, bulge = _chord(x0i, x1i, u0i, u1i, x0j, x1j, u0j, u1j, box, per, dt)
+    return _chord_touch(r2, rd, dd, bulge, d)
+
+
+@njit(cache=True, no_cfunc_wrapper=True, inline="always", error_model="numpy")
+def _chord_touch(r2, rd, dd, bulge, d):
+    """Lower bound on the fraction of the span at which a chord r₀ + sΔ with bulge B
+    (_chord's terms) can first come within d (inf: not in the span): the chord first
+    within d + B, the smaller root of a quadratic."""
     lim = d * (1.0 + TOUCH_EPS) + bulge
     c0 = r2 - lim * lim
     if c0 <= 0.0:
@@ -1806,7 +1831,7 @@ def _substep_part(part, cs, st, bc, model, s, dt, h, lo, hi, app, blk, lanes, wo
     KICK_KICK_DRIFT), its members cut into ``lanes`` contiguous ranges done in parallel.
     Every member's arithmetic is its own (_forces), so the result is that of one thread,
     bit for bit. Returns the count of _forces (FORCES), else 0. No member retires here
-    (_may_retire needs the members one after another; on two threads retiring them
+    (_quiet_until needs the members one after another; on two threads retiring them
     afterwards, one after another, measured slower, not faster)."""
     m = _block_size(cs, lo, hi, app)
     for q in prange(lanes):
@@ -1814,7 +1839,7 @@ def _substep_part(part, cs, st, bc, model, s, dt, h, lo, hi, app, blk, lanes, wo
         t1 = (np.int64(q) + 1) * m // lanes
         v = as_tuple(cs, SubstepSet)  # the hot loops read tuples (grains/refs.py)
         if part == KICK_DRIFT or part == KICK_KICK_DRIFT:
-            _kick_drift(v, model, s, dt, h, lo, hi, app, t0, t1, part == KICK_KICK_DRIFT, False)
+            _kick_drift(v, model, s, dt, h, lo, hi, app, t0, t1, part == KICK_KICK_DRIFT, False, 0.0)
         elif part == FORCES:
             woke[q] = _forces(v, as_tuple(st, GrainState), as_tuple(bc, BedContext), model, s, dt, h,
                               lo, hi, app, blk, t0, t1, 0.0, False)[0]
@@ -1867,7 +1892,7 @@ def _run_block(cs, cand, c0, c1, lo, hi, blk, x0w, st, bc, model, cl, ph, dt, n_
                                    lanes, woke)
         else:
             m = _block_size(v, lo, hi, app)
-            n_go = _kick_drift(v, model, s_next, dt, h, lo, hi, app, first, m, k > 0, True)
+            n_go = _kick_drift(v, model, s_next, dt, h, lo, hi, app, first, m, k > 0, True, backoff)
             n_woke, left = _forces(v, sv, bv, model, s_next, dt, h, lo, hi, app, blk, first, n_go, backoff, True)
             cs.retired[0] += left
         if n_woke > 0:
