@@ -99,6 +99,39 @@ def test_composites_split_their_contact_phase_between_the_two_processes(tmp_path
             assert (hits, misses, sigs) == (0, 1, 1), (name, res)
 
 
+SERIAL = WATCH + textwrap.dedent("""
+    import numba
+    from saltation.contacts import phase
+    saltation.run("cases/default.toml", out=sys.argv[1], progress=False, overwrite=True,
+                  **{"run.n_particles": 40, "run.duration": 0.05, "output.vtk": False})
+    kernels = {name: count(k) for name, k in vars(phase).items()
+               if isinstance(k, numba.core.registry.CPUDispatcher) and k.overloads}
+    print(json.dumps({"helpers": started, "kernels": kernels}))
+""")
+
+
+def test_the_sphere_contact_phase_compiles_each_kernel_once(tmp_path, monkeypatch):
+    # everything in this process (no helper), from an empty cache: every kernel of the
+    # contact phase that the step reaches is compiled for one signature only. A literal
+    # argument (f(..., True) beside f(..., False)) compiles f and all it inlines twice
+    # (ARCHITECTURE.md, "What a kernel compiles, and how often"): _forces and _kick_drift
+    # did, and the first run took 11 s longer.
+    monkeypatch.setenv("SALTATION_SERIAL_COMPILE", "1")
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cache"), PYTHONPATH=str(ROOT))
+    proc = subprocess.run([sys.executable, "-c", SERIAL, str(tmp_path / "run")], cwd=ROOT, env=env,
+                          capture_output=True, text=True, timeout=1200)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    res = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert res["helpers"] == [], res
+    kernels = res["kernels"]
+    for name in ("soft_contact_phase", "_run_block", "_forces", "_kick_drift", "_wake_up", "_substep_part"):
+        assert name in kernels, (name, sorted(kernels))
+    # _resized (grow one array of the set) serves arrays of several types and ranks; _fill
+    # was compiled twice too (its count argument first typed as the literal 0)
+    twice = {name: sigs for name, (_, _, sigs) in kernels.items() if sigs > 1 and name != "_resized"}
+    assert twice == {}, twice
+
+
 def test_no_helper_on_request(monkeypatch):
     from saltation.engine import cold_start
 

@@ -1625,7 +1625,9 @@ def _gather(x0w, st, cl, bc, ph, dt, d, blocked, forced, cs, filtered):
     arrays of ~1 kB per member cost a page fault per 4 kB at first touch, every step)."""
     n = x0w.shape[0]
     loc, start, nbr, nbr_count = ph.loc, ph.start, cl.nbr, cl.nbr_count
-    members = 0
+    # not the literal 0: typing passes _fill a Literal[int](0) count first, which compiled
+    # it once more
+    members = np.int64(0)
     rows = 0
     n_cand = 0
     order = cl.order
@@ -1812,9 +1814,10 @@ def _wake_up(cs, x0w, st, bc, model, cl, ph, s, dt, h, lo, hi, app, blk, flagged
         _positions(v, s, dt, n_before, v.n[0], v.n[0], np.int64(0), v.n[0] - n_before)
         for t in range(q_hi, q_new):
             # b alone (as members b..b and none appended): the compiled _forces, not a
-            # second inlined copy of the force code (wake-ups are rare)
+            # second inlined copy of the force code (wake-ups are rare). Its flags are
+            # run-time values (s < 0: False): a literal True or False would compile it once more
             b = v.queue[t]
-            _forces(v, sv, bv, model, s, dt, h, b, b + 1, v.n[0], blk, np.int64(0), np.int64(1), 0.0, False)
+            _forces(v, sv, bv, model, s, dt, h, b, b + 1, v.n[0], blk, np.int64(0), np.int64(1), 0.0, s < 0.0)
         q_lo = q_hi
         q_hi = q_new
     return cs, q_hi - recalled
@@ -1839,10 +1842,11 @@ def _substep_part(part, cs, st, bc, model, s, dt, h, lo, hi, app, blk, lanes, wo
         t1 = (np.int64(q) + 1) * m // lanes
         v = as_tuple(cs, SubstepSet)  # the hot loops read tuples (grains/refs.py)
         if part == KICK_DRIFT or part == KICK_KICK_DRIFT:
-            _kick_drift(v, model, s, dt, h, lo, hi, app, t0, t1, part == KICK_KICK_DRIFT, False, 0.0)
+            # the flags as run-time values (part < 0: False), as in _run_block
+            _kick_drift(v, model, s, dt, h, lo, hi, app, t0, t1, part == KICK_KICK_DRIFT, part < 0, 0.0)
         elif part == FORCES:
             woke[q] = _forces(v, as_tuple(st, GrainState), as_tuple(bc, BedContext), model, s, dt, h,
-                              lo, hi, app, blk, t0, t1, 0.0, False)[0]
+                              lo, hi, app, blk, t0, t1, 0.0, part < 0)[0]
         else:
             _kick(v, model, h, lo, hi, app, t0, t1)
     return woke[:lanes].sum() if part == FORCES else 0
@@ -1863,6 +1867,7 @@ def _run_block(cs, cand, c0, c1, lo, hi, blk, x0w, st, bc, model, cl, ph, dt, n_
     woken = 0
     woke = np.zeros(max(lanes, 1), np.int64)
     first = np.int64(0)  # not the literal 0: that would compile the kernels once more
+    listed, scanned = first == 0, first != 0  # True and False, likewise not literals
     # the sub-step kernels read tuples (grains/refs.as_tuple); the set's view is made
     # again whenever a wake-up may have grown the set
     v, sv, bv = as_tuple(cs, SubstepSet), as_tuple(st, GrainState), as_tuple(bc, BedContext)
@@ -1871,7 +1876,8 @@ def _run_block(cs, cand, c0, c1, lo, hi, blk, x0w, st, bc, model, cl, ph, dt, n_
     ptr, joined = _join(v, cand, c0, c1, 0.0, 0.0, dt)
     n_act += joined
     _positions(v, 0.0, dt, lo, hi, app, first, _block_size(v, lo, hi, app))
-    n_woke = _forces(v, sv, bv, model, 0.0, dt, h, lo, hi, app, blk, first, _block_size(v, lo, hi, app), 0.0, False)[0]
+    n_woke = _forces(v, sv, bv, model, 0.0, dt, h, lo, hi, app, blk, first, _block_size(v, lo, hi, app), 0.0,
+                     scanned)[0]
     if n_woke > 0:
         cs, k_w = _wake_up(cs, x0w, st, bc, model, cl, ph, 0.0, dt, h, lo, hi, app, blk, n_woke)
         n_act += k_w
@@ -1892,8 +1898,8 @@ def _run_block(cs, cand, c0, c1, lo, hi, blk, x0w, st, bc, model, cl, ph, dt, n_
                                    lanes, woke)
         else:
             m = _block_size(v, lo, hi, app)
-            n_go = _kick_drift(v, model, s_next, dt, h, lo, hi, app, first, m, k > 0, True, backoff)
-            n_woke, left = _forces(v, sv, bv, model, s_next, dt, h, lo, hi, app, blk, first, n_go, backoff, True)
+            n_go = _kick_drift(v, model, s_next, dt, h, lo, hi, app, first, m, k > 0, listed, backoff)
+            n_woke, left = _forces(v, sv, bv, model, s_next, dt, h, lo, hi, app, blk, first, n_go, backoff, listed)
             cs.retired[0] += left
         if n_woke > 0:
             cs, k_w = _wake_up(cs, x0w, st, bc, model, cl, ph, s_next, dt, h, lo, hi, app, blk,
