@@ -1153,8 +1153,9 @@ def _forces(cs, st, bc, model, s, dt, h, lo, hi, app, blk, t0, t1, backoff, list
     its own row (both grains of a pair compute it): members can be done in any order.
     The members that touched one not active are listed in cs.flagged[t0:], in this order.
     ``backoff`` > 0: then a member that touches nothing retires until it may touch
-    something unforced (_quiet_until, which needs the members one after another: which ones retire
-    depends on their order, the result does not), or tries again ``backoff`` sub-steps on.
+    something unforced (_quiet_until, which needs the members one after another: which
+    ones retire depends on their order, the result does not), or tries again ``backoff``
+    sub-steps on.
     Returns how many were woken and the sub-steps the retired members have left."""
     update = s > 0.0
     woke = 0
@@ -1174,10 +1175,27 @@ def _forces(cs, st, bc, model, s, dt, h, lo, hi, app, blk, t0, t1, backoff, list
             if until > s:
                 active[a] = RETIRED
                 cs.retry[a] = until  # forced again from the first sub-step at or after it
-                left += round((1.0 - s) * dt / h)
+                left += _substeps_left(s, dt, h)
             else:
                 cs.retry[a] = s + backoff * h / dt
     return woke, left
+
+
+@njit(cache=True, no_cfunc_wrapper=True, inline="always")
+def _substeps_left(s, dt, h):
+    """Sub-steps of the step after s: a retired member's count (RETIRED_SUBSTEPS), added
+    when it retires at s and taken back when it is forced again at s (_force_again)."""
+    return round((1.0 - s) * dt / h)
+
+
+@njit(cache=True, no_cfunc_wrapper=True, inline="always")
+def _force_again(cs, a, s, dt, h, backoff):
+    """Retired member a is forced (ACTIVE) again from s: its quiet time is over
+    (_kick_drift) or an active one touched it (_wake_up). Its deviation went on unforced,
+    as when forced by nothing; it may try to retire again ``backoff`` sub-steps on."""
+    cs.active[a] = ACTIVE
+    cs.retry[a] = s + backoff * h / dt
+    cs.retired[0] -= _substeps_left(s, dt, h)
 
 
 @njit(cache=True, no_cfunc_wrapper=True, inline="always", error_model="numpy", _nrt=False)
@@ -1277,9 +1295,7 @@ def _kick_drift(cs, model, s_next, dt, h, lo, hi, app, t0, t1, kick_first, listi
         _at(cs, a, s_next, dt)
         if listing:
             if active[a] == RETIRED and s_next >= cs.retry[a]:
-                active[a] = ACTIVE  # its quiet time is over (_quiet_until): it looks again
-                cs.retired[0] -= round((1.0 - s_next) * dt / h)
-                cs.retry[a] = s_next + backoff * h / dt
+                _force_again(cs, a, s_next, dt, h, backoff)  # its quiet time (_quiet_until) is over
             go[n_go] = a
             n_go += active[a] == ACTIVE
     return n_go
@@ -1799,9 +1815,7 @@ def _wake_up(cs, x0w, st, bc, model, cl, ph, s, dt, h, lo, hi, app, blk, flagged
         for t in range(q_hi, q_new):
             b = cs.queue[t]
             if cs.active[b] == CLAIMED:
-                cs.active[b] = ACTIVE  # its deviation went on unforced, as when forced by nothing
-                cs.retry[b] = s + ph.retire_backoff[0] * h / dt
-                cs.retired[0] -= round((1.0 - s) * dt / h)  # the sub-steps it had left
+                _force_again(cs, b, s, dt, h, ph.retire_backoff[0])
                 recalled += 1
                 continue
             if cs.has_row[b] == 0:
