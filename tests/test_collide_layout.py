@@ -7,11 +7,18 @@ import numpy as np
 from saltation.bed.packed import make_packed_bed
 from saltation.contacts import pairs as K
 from saltation.contacts.phase import (
+    ACTIVE,
+    RETIRED,
     RETIRED_SUBSTEPS,
     SUBSTEPPED,
     WAKES,
+    _force_again,
     _grow,
     _make_set,
+    _rest_of_path,
+    _set_path,
+    _set_place,
+    _state_of,
     empty_substep_set,
     make_bed_context,
     make_contact_phase,
@@ -150,3 +157,30 @@ def test_retired_grains_give_the_same_bits():
             np.testing.assert_array_equal(a, b)
         same = np.arange(ph.counters.shape[0]) != RETIRED_SUBSTEPS
         np.testing.assert_array_equal(ph.counters[same], ph0.counters[same])
+
+
+def test_a_retired_member_reads_as_if_it_were_active():
+    """A retired member keeps only its position in cur (_set_place, "Retired members"); a
+    touch (_state_of), _quiet_until beside it (_rest_of_path) and its being forced again
+    (_force_again) work out its velocity and spin from its path and deviation: the same
+    bits as the cur _set_path gives an active one with the same path and deviation."""
+    rng = np.random.default_rng(5)
+    cs = substep_view(_make_set(2, 1))
+    cs.path[0] = rng.normal(size=18)
+    cs.path[1] = cs.path[0]
+    cs.dev[0] = 1e-3 * rng.normal(size=9)
+    cs.dev[1] = cs.dev[0]
+    cs.active[:] = (ACTIVE, RETIRED)
+    cs.retired[0] = 0
+    s, dt, h = 47 / 128, 0.02, 0.02 / 128
+    _set_path(cs, 0, s, dt)
+    cs.cur[1] = np.nan  # what _set_place leaves stale is never read
+    _set_place(cs, 1, s, dt)
+    np.testing.assert_array_equal(cs.cur[1, :3], cs.cur[0, :3])
+    assert np.isnan(cs.cur[1, 3:]).all()
+    np.testing.assert_array_equal(_state_of(cs, 1, s, dt), _state_of(cs, 0, s, dt))
+    for c in range(3):
+        np.testing.assert_array_equal(_rest_of_path(cs, 1, s, dt, c), _rest_of_path(cs, 0, s, dt, c))
+    _force_again(cs, 1, s, dt, h, 8.0)
+    assert cs.active[1] == ACTIVE
+    np.testing.assert_array_equal(cs.cur[1], cs.cur[0])

@@ -231,9 +231,13 @@ after that time (_kick_drift), and only if that is at least QUIET_MIN = 2 sub-st
 does it retire at all. An active partner needs no check: it looks at the pair at every
 sub-step, and if it touches a retired member (a grain deflected into it) it wakes it as it
 wakes an inactive one (_wake_up): forced again from that sub-step. A retired member keeps
-its kicks (by a zero force) and drift, so its position, velocity and deviation are those
-it would have had active: the same bits, only the force loop and the bed search are
-skipped. One that may not retire tries again RETIRE_BACKOFF = 8 sub-steps later
+its drift, so its position, velocity and deviation are those it would have had active:
+the same bits. Skipped are the force loop and the bed search, its kicks (its force is +0,
+so they would add exactly nothing: a deviation that starts at +0 never becomes −0), and
+its velocity and spin in ``cur`` (_set_place keeps only its position, which the force
+loop reads as ``at``): the few that read them (a touch, _quiet_until beside it, its being
+forced again) work them out from its path and deviation (_velocity_of, _spin_of: the
+operations of _set_path, so the same bits). One that may not retire tries again RETIRE_BACKOFF = 8 sub-steps later
 (``ph.retire_backoff``; 0: never), as does one forced again when its time is up. The
 decisions read the partners' states, so they are made as _forces goes through the members
 one after another; on several threads (a block cut into lanes, below) no member retires.
@@ -576,7 +580,30 @@ def _set_path(cs, a, s, dt):
         x, v = _hermite(path[a, c], path[a, 9 + c], path[a, 3 + c], path[a, 12 + c], s, dt)
         cur[a, c] = x + dev[a, c]
         cur[a, 3 + c] = v + dev[a, 3 + c]
-        cur[a, 6 + c] = (1.0 - s) * path[a, 6 + c] + s * path[a, 15 + c] + dev[a, 6 + c]
+        cur[a, 6 + c] = _spin_of(cs, a, s, c)
+
+
+@njit(cache=True, no_cfunc_wrapper=True, inline="always", error_model="numpy", _nrt=False)
+def _set_place(cs, a, s, dt):
+    """cur P of member a at s (that of _set_path), for a retired member: its V and W are
+    worked out when read (_velocity_of, _spin_of; "Retired members")."""
+    path = cs.path
+    for c in range(3):
+        cs.cur[a, c] = _hermite(path[a, c], path[a, 9 + c], path[a, 3 + c], path[a, 12 + c], s, dt)[0] + cs.dev[a, c]
+
+
+@njit(cache=True, no_cfunc_wrapper=True, inline="always", error_model="numpy", _nrt=False)
+def _velocity_of(cs, a, s, dt, c):
+    """cur V of member a along axis c at s, as _set_path works it out (the same bits)."""
+    p = cs.path
+    return _hermite(p[a, c], p[a, 9 + c], p[a, 3 + c], p[a, 12 + c], s, dt)[1] + cs.dev[a, 3 + c]
+
+
+@njit(cache=True, no_cfunc_wrapper=True, inline="always", error_model="numpy", _nrt=False)
+def _spin_of(cs, a, s, c):
+    """cur W of member a along axis c at s (spin linear between the step's ends)."""
+    p = cs.path
+    return (1.0 - s) * p[a, 6 + c] + s * p[a, 15 + c] + cs.dev[a, 6 + c]
 
 
 @njit(cache=True, no_cfunc_wrapper=True, inline="always", error_model="numpy", _nrt=False)
@@ -594,10 +621,15 @@ def _position_of(cs, b, s, dt):
 
 @njit(cache=True, no_cfunc_wrapper=True, inline="always", error_model="numpy", _nrt=False)
 def _state_of(cs, b, s, dt):
-    """(x, v, ω) of member b at s: cur when active, else its free-flight path."""
-    if cs.active[b] != 0:
+    """(x, v, ω) of member b at s: cur when active (a retired one's V and W worked out
+    now: _set_place), else its free-flight path."""
+    if cs.active[b] == ACTIVE:
         c = cs.cur
         return c[b, 0], c[b, 1], c[b, 2], c[b, 3], c[b, 4], c[b, 5], c[b, 6], c[b, 7], c[b, 8]
+    if cs.active[b] != 0:
+        c = cs.cur
+        return (c[b, 0], c[b, 1], c[b, 2], _velocity_of(cs, b, s, dt, 0), _velocity_of(cs, b, s, dt, 1),
+                _velocity_of(cs, b, s, dt, 2), _spin_of(cs, b, s, 0), _spin_of(cs, b, s, 1), _spin_of(cs, b, s, 2))
     p = cs.path
     x0, v0 = _hermite(p[b, 0], p[b, 9], p[b, 3], p[b, 12], s, dt)
     x1, v1 = _hermite(p[b, 1], p[b, 10], p[b, 4], p[b, 13], s, dt)
@@ -1192,8 +1224,10 @@ def _substeps_left(s, dt, h):
 def _force_again(cs, a, s, dt, h, backoff):
     """Retired member a is forced (ACTIVE) again from s: its quiet time is over
     (_kick_drift) or an active one touched it (_wake_up). Its deviation went on unforced,
-    as when forced by nothing; it may try to retire again ``backoff`` sub-steps on."""
+    as when forced by nothing; it may try to retire again ``backoff`` sub-steps on. Its
+    cur is made whole again (retired, only its position was kept: _set_place)."""
     cs.active[a] = ACTIVE
+    _set_path(cs, a, s, dt)
     cs.retry[a] = s + backoff * h / dt
     cs.retired[0] -= _substeps_left(s, dt, h)
 
@@ -1209,7 +1243,8 @@ def _rest_of_path(cs, b, s, dt, c):
         x, u = _hermite(p[b, c], p[b, 9 + c], p[b, 3 + c], p[b, 12 + c], s, dt)
         return x, u, p[b, 9 + c], p[b, 12 + c]
     du = cs.dev[b, 3 + c]
-    return cs.cur[b, c], cs.cur[b, 3 + c], p[b, 9 + c] + cs.dev[b, c] + du * ((1.0 - s) * dt), p[b, 12 + c] + du
+    u = cs.cur[b, 3 + c] if cs.active[b] == ACTIVE else _velocity_of(cs, b, s, dt, c)  # retired: _set_place
+    return cs.cur[b, c], u, p[b, 9 + c] + cs.dev[b, c] + du * ((1.0 - s) * dt), p[b, 12 + c] + du
 
 
 @njit(cache=True, no_cfunc_wrapper=True, error_model="numpy", _nrt=False)
@@ -1283,19 +1318,23 @@ def _kick_drift(cs, model, s_next, dt, h, lo, hi, app, t0, t1, kick_first, listi
         if active[a] == 0:
             _at(cs, a, s_next, dt)
             continue
-        if kick_first:
+        if active[a] == ACTIVE:  # a retired member's force is +0: its kicks would add exactly nothing
+            if kick_first:
+                _half_kick(dev, ft, a, h, inv_m, inv_i)
             _half_kick(dev, ft, a, h, inv_m, inv_i)
-        _half_kick(dev, ft, a, h, inv_m, inv_i)
         for c in range(3):
             dev[a, c] += h * dev[a, 3 + c]
         dd = dev[a, 0] ** 2 + dev[a, 1] ** 2 + dev[a, 2] ** 2
         if dd > dev_max[a]:
             dev_max[a] = dd
-        _set_path(cs, a, s_next, dt)
+        if listing and active[a] == RETIRED and s_next >= cs.retry[a]:
+            _force_again(cs, a, s_next, dt, h, backoff)  # its quiet time (_quiet_until) is over
+        elif active[a] == ACTIVE:
+            _set_path(cs, a, s_next, dt)
+        else:
+            _set_place(cs, a, s_next, dt)  # retired: its V and W are worked out when read
         _at(cs, a, s_next, dt)
         if listing:
-            if active[a] == RETIRED and s_next >= cs.retry[a]:
-                _force_again(cs, a, s_next, dt, h, backoff)  # its quiet time (_quiet_until) is over
             go[n_go] = a
             n_go += active[a] == ACTIVE
     return n_go
@@ -1327,7 +1366,7 @@ def _kick(cs, model, h, lo, hi, app, t0, t1):
     active, dev, ft = cs.active, cs.dev, cs.ft
     for t in range(t0, t1):
         a = _block_member(t, lo, hi, app)
-        if active[a] == 0:
+        if active[a] != ACTIVE:  # retired: its force is +0 (_kick_drift)
             continue
         _half_kick(dev, ft, a, h, inv_m, inv_i)
 
