@@ -1209,7 +1209,7 @@ def _forces(cs, st, bc, model, s, dt, h, lo, hi, app, blk, t0, t1, backoff, list
                 cs.retry[a] = until  # forced again from the first sub-step at or after it
                 left += _substeps_left(s, dt, h)
             else:
-                cs.retry[a] = s + backoff * h / dt
+                cs.retry[a] = _next_try(s, dt, h, backoff)
     return woke, left
 
 
@@ -1221,6 +1221,13 @@ def _substeps_left(s, dt, h):
 
 
 @njit(cache=True, no_cfunc_wrapper=True, inline="always")
+def _next_try(s, dt, h, backoff):
+    """When a member forced at s that may not retire (or has just been forced again)
+    tries to retire again: ``backoff`` sub-steps on (a step fraction)."""
+    return s + backoff * h / dt
+
+
+@njit(cache=True, no_cfunc_wrapper=True, inline="always")
 def _force_again(cs, a, s, dt, h, backoff):
     """Retired member a is forced (ACTIVE) again from s: its quiet time is over
     (_kick_drift) or an active one touched it (_wake_up). Its deviation went on unforced,
@@ -1228,7 +1235,7 @@ def _force_again(cs, a, s, dt, h, backoff):
     cur is made whole again (retired, only its position was kept: _set_place)."""
     cs.active[a] = ACTIVE
     _set_path(cs, a, s, dt)
-    cs.retry[a] = s + backoff * h / dt
+    cs.retry[a] = _next_try(s, dt, h, backoff)
     cs.retired[0] -= _substeps_left(s, dt, h)
 
 
