@@ -237,17 +237,21 @@ so they would add exactly nothing: a deviation that starts at +0 never becomes �
 its velocity and spin in ``cur`` (_set_place keeps only its position, which the force
 loop reads as ``at``): the few that read them (a touch, _quiet_until beside it, its being
 forced again) work them out from its path and deviation (_velocity_of, _spin_of: the
-operations of _set_path, so the same bits). One that may not retire tries again RETIRE_BACKOFF = 8 sub-steps later
-(``ph.retire_backoff``; 0: never), as does one forced again when its time is up. The
-decisions read the partners' states, so they are made as _forces goes through the members
-one after another; on several threads (a block cut into lanes, below) no member retires.
+operations of _set_path, so the same bits). One that may not retire tries again
+RETIRE_BACKOFF = 8 sub-steps later (``ph.retire_backoff``; 0: never), as does one forced
+again when its time is up. The decisions read the partners' states, so they are made as
+_forces goes through the members one after another; on several threads (a block cut into
+lanes, below) no member retires.
 ``counters[RETIRED_SUBSTEPS]`` counts the retired grain-sub-steps (summary.json "timing").
 At 3.94 % (reduced sweep case, after spin-up, 200 steps, one thread): retired for the rest
 of the step only, 13.4 of 23.6 M grain-sub-steps retired, the sub-steps 4.33 → 3.80 µs per
 grain-step; retired until a time, 15.4 M, and (with the lists below) 3.24–3.26 → 3.06–3.11;
 the same end state bit for bit. Retiring on two threads measured slower: 3.45 µs decided
 one member after another after the parallel force pass, 3.00 decided in the lanes
-(partners in other lanes checked by their courses), against 2.75–2.83 without.
+(partners in other lanes checked by their courses), against 2.75–2.83 without. Skipping a
+retired member's kicks and its velocity and spin: the sub-steps over the free flight of
+the same run 2.89 → 2.70 (medians of five runs each, old and new alternated, on a machine
+whose speed drifted by 2×; benchmarks/bench_dense.py).
 
 Lists instead of scans. In the dense layer a block holds ~2 750 members, of which ~400 are
 forced at a sub-step, ~500 retired and the rest not sub-stepped (their ``at`` only): a
