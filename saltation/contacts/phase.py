@@ -577,11 +577,18 @@ def _hermite(x0, x1, v0, v1, s, dt):
 
 
 @njit(cache=True, no_cfunc_wrapper=True, inline="always", error_model="numpy", _nrt=False)
+def _on_path(path, a, c, s, dt):
+    """Member a's free-flight position and velocity along axis c at s (_hermite of its
+    path row: x₀, u₀, ϖ₀, x₁, u₁, ϖ₁)."""
+    return _hermite(path[a, c], path[a, 9 + c], path[a, 3 + c], path[a, 12 + c], s, dt)
+
+
+@njit(cache=True, no_cfunc_wrapper=True, inline="always", error_model="numpy", _nrt=False)
 def _set_path(cs, a, s, dt):
     """cur (P, V, W) of member a at s: free-flight path plus its deviation."""
     path, cur, dev = cs.path, cs.cur, cs.dev
     for c in range(3):
-        x, v = _hermite(path[a, c], path[a, 9 + c], path[a, 3 + c], path[a, 12 + c], s, dt)
+        x, v = _on_path(path, a, c, s, dt)
         cur[a, c] = x + dev[a, c]
         cur[a, 3 + c] = v + dev[a, 3 + c]
         cur[a, 6 + c] = _spin_of(cs, a, s, c)
@@ -591,16 +598,14 @@ def _set_path(cs, a, s, dt):
 def _set_place(cs, a, s, dt):
     """cur P of member a at s (that of _set_path), for a retired member: its V and W are
     worked out when read (_velocity_of, _spin_of; "Retired members")."""
-    path = cs.path
     for c in range(3):
-        cs.cur[a, c] = _hermite(path[a, c], path[a, 9 + c], path[a, 3 + c], path[a, 12 + c], s, dt)[0] + cs.dev[a, c]
+        cs.cur[a, c] = _on_path(cs.path, a, c, s, dt)[0] + cs.dev[a, c]
 
 
 @njit(cache=True, no_cfunc_wrapper=True, inline="always", error_model="numpy", _nrt=False)
 def _velocity_of(cs, a, s, dt, c):
     """cur V of member a along axis c at s, as _set_path works it out (the same bits)."""
-    p = cs.path
-    return _hermite(p[a, c], p[a, 9 + c], p[a, 3 + c], p[a, 12 + c], s, dt)[1] + cs.dev[a, 3 + c]
+    return _on_path(cs.path, a, c, s, dt)[1] + cs.dev[a, 3 + c]
 
 
 @njit(cache=True, no_cfunc_wrapper=True, inline="always", error_model="numpy", _nrt=False)
@@ -618,9 +623,7 @@ def _position_of(cs, b, s, dt):
     if cs.active[b] != 0:
         return cs.cur[b, 0], cs.cur[b, 1], cs.cur[b, 2]
     p = cs.path
-    return (_hermite(p[b, 0], p[b, 9], p[b, 3], p[b, 12], s, dt)[0],
-            _hermite(p[b, 1], p[b, 10], p[b, 4], p[b, 13], s, dt)[0],
-            _hermite(p[b, 2], p[b, 11], p[b, 5], p[b, 14], s, dt)[0])
+    return _on_path(p, b, 0, s, dt)[0], _on_path(p, b, 1, s, dt)[0], _on_path(p, b, 2, s, dt)[0]
 
 
 @njit(cache=True, no_cfunc_wrapper=True, inline="always", error_model="numpy", _nrt=False)
@@ -635,9 +638,9 @@ def _state_of(cs, b, s, dt):
         return (c[b, 0], c[b, 1], c[b, 2], _velocity_of(cs, b, s, dt, 0), _velocity_of(cs, b, s, dt, 1),
                 _velocity_of(cs, b, s, dt, 2), _spin_of(cs, b, s, 0), _spin_of(cs, b, s, 1), _spin_of(cs, b, s, 2))
     p = cs.path
-    x0, v0 = _hermite(p[b, 0], p[b, 9], p[b, 3], p[b, 12], s, dt)
-    x1, v1 = _hermite(p[b, 1], p[b, 10], p[b, 4], p[b, 13], s, dt)
-    x2, v2 = _hermite(p[b, 2], p[b, 11], p[b, 5], p[b, 14], s, dt)
+    x0, v0 = _on_path(p, b, 0, s, dt)
+    x1, v1 = _on_path(p, b, 1, s, dt)
+    x2, v2 = _on_path(p, b, 2, s, dt)
     return (x0, x1, x2, v0, v1, v2,
             (1.0 - s) * p[b, 6] + s * p[b, 15],
             (1.0 - s) * p[b, 7] + s * p[b, 16],
@@ -1251,7 +1254,7 @@ def _rest_of_path(cs, b, s, dt, c):
     δu, which adds δx + δu(σ − s)Δt to the cubic: another cubic through the shifted ends."""
     p = cs.path
     if cs.active[b] == 0:
-        x, u = _hermite(p[b, c], p[b, 9 + c], p[b, 3 + c], p[b, 12 + c], s, dt)
+        x, u = _on_path(p, b, c, s, dt)
         return x, u, p[b, 9 + c], p[b, 12 + c]
     du = cs.dev[b, 3 + c]
     u = cs.cur[b, 3 + c] if cs.active[b] == ACTIVE else _velocity_of(cs, b, s, dt, c)  # retired: _set_place
