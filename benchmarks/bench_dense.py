@@ -122,6 +122,33 @@ def _sweep_case(path, concentration_pct, tau_ratio):
                      f"(concentrations {sorted({100 * c.values['run.concentration'] for c in sw.cases})})")
 
 
+def build(tables, overrides=None, out="/tmp/bench_dense_unused"):
+    """(simulation, flow dataset, grain state, workspace) of a case, started, not stepped
+    (its stepper advanced directly: no outputs)."""
+    from saltation.case.schema import load_case, resolve_domain
+    from saltation.engine.simulation import Simulation, _les_box_m, open_flow
+    from saltation.flight.spheres import make_workspace
+
+    case = load_case(tables, overrides)
+    ds = open_flow(case)
+    case = resolve_domain(case, _les_box_m(ds, case))
+    sim = Simulation(case, ds, out, progress=False)
+    st = sim._initial_state()
+    ws = make_workspace(sim.n)
+    sim.stepper.start(st.pos)
+    return sim, ds, st, ws
+
+
+def steps(sim, f, st, ws, step0, n):
+    """n hydrodynamic steps from global step step0 (jumps not collected); returns n."""
+    done = 0
+    while done < n:
+        k = sim.stepper.advance(f, st, ws, (step0 + done) * sim.dt, n - done, step0 + done)
+        st.jump_buf_n[:] = 0  # jumps are not collected here
+        done += k
+    return done
+
+
 def _copy_tuple(t):
     return type(t)(*[a.copy() for a in t])
 
@@ -255,32 +282,11 @@ def one_concentration(args) -> dict:
     import numba
     import numpy as np
 
-    from saltation.case.schema import load_case, resolve_domain
     from saltation.contacts.phase import CLOCK_NAMES, CLOCK_SUBSTEPS, N_CLOCKS, RETIRED_SUBSTEPS, SUBSTEPPED
-    from saltation.engine.simulation import Simulation, _les_box_m, open_flow
-    from saltation.flight.spheres import make_workspace
 
     most = numba.config.NUMBA_NUM_THREADS
     threads = [t for t in args.threads if t <= most]
     say = lambda *a: print(f"[C = {args.one} %]", *a, file=sys.stderr, flush=True)  # noqa: E731
-
-    def build(tables, overrides=None):
-        case = load_case(tables, overrides)
-        ds = open_flow(case)
-        case = resolve_domain(case, _les_box_m(ds, case))
-        sim = Simulation(case, ds, "/tmp/bench_dense_unused", progress=False)
-        st = sim._initial_state()
-        ws = make_workspace(sim.n)
-        sim.stepper.start(st.pos)
-        return sim, ds, st, ws
-
-    def steps(sim, f, st, ws, step0, n):
-        done = 0
-        while done < n:
-            k = sim.stepper.advance(f, st, ws, (step0 + done) * sim.dt, n - done, step0 + done)
-            st.jump_buf_n[:] = 0  # jumps are not collected here
-            done += k
-        return done
 
     # compile (cached after the first run) on a small case
     t0 = time.perf_counter()

@@ -152,38 +152,18 @@ def main():
         sys.exit(subprocess.run([sys.executable, __file__, *sys.argv[1:], "--keep", str(work)], env=env).returncode)
 
     import numba
-    import numpy as np
 
     import saltation
-    from saltation.case.schema import load_case, resolve_domain
-    from saltation.contacts.phase import N_CLOCKS
-    from saltation.engine.simulation import Simulation, _les_box_m, open_flow
-    from saltation.flight.spheres import make_workspace
 
     sys.path.insert(0, str(HERE))
-    from bench_dense import REDUCED, _sweep_case  # noqa: E402 - the benchmarks' folder
+    from bench_dense import REDUCED, _sweep_case, build, steps  # noqa: E402 - the benchmarks' folder
 
-    tables, values = _sweep_case(REDUCED, args.concentration, args.tau_ratio)
-    case = load_case(tables, values)
-    ds = open_flow(case)
-    case = resolve_domain(case, _les_box_m(ds, case))
-    sim = Simulation(case, ds, str(work / "unused_run"), progress=False)
-    st, ws = sim._initial_state(), make_workspace(sim.n)
-    stp = sim.stepper
-    stp.start(st.pos)
-    stp.ph = stp.ph._replace(clocks=np.zeros(N_CLOCKS))
+    sim, ds, st, ws = build(*_sweep_case(REDUCED, args.concentration, args.tau_ratio), out=str(work / "unused_run"))
     numba.set_num_threads(1)
 
-    def steps(step0, n):
-        done = 0
-        while done < n:
-            done += stp.advance(ds.arrays, st, ws, (step0 + done) * sim.dt, n - done, step0 + done)
-            st.jump_buf_n[:] = 0  # jumps are not collected here
-        return done
-
     t0 = time.perf_counter()
-    spin = int(round(args.spinup / case.dt))
-    steps(0, spin)
+    spin = int(round(args.spinup / sim.case.dt))  # seconds per step
+    steps(sim, ds.arrays, st, ws, 0, spin)
     print(f"N = {sim.n}, C = {args.concentration} %: compile and spin-up ({spin} steps) "
           f"{time.perf_counter() - t0:.0f} s", file=sys.stderr)
     data = work / "perf.data"
@@ -191,7 +171,7 @@ def main():
                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     time.sleep(1.0)  # perf attaches
     t0 = time.perf_counter()
-    steps(spin, args.steps)
+    steps(sim, ds.arrays, st, ws, spin, args.steps)
     wall = time.perf_counter() - t0
     rec.send_signal(signal.SIGINT)
     rec.wait()
