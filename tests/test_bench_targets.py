@@ -1,0 +1,55 @@
+"""benchmarks/bench_dense.py judges a run against issue 19's targets: met or MISSED from
+the 3.94 % one-thread row and the sweep estimate, and "not comparable" when the dense
+layer had no time to form (spin-up under 1 s)."""
+import importlib.util
+import pathlib
+
+import pytest
+
+
+@pytest.fixture(scope="module")
+def bench():
+    spec = importlib.util.spec_from_file_location(
+        "bench_dense", pathlib.Path(__file__).parents[1] / "benchmarks" / "bench_dense.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def _rows(grain_steps, contacts_us, free_us, spinup_s=1.0000001, c=3.9405):
+    one = {"grain_steps_per_s": grain_steps, "contacts_us": contacts_us, "free_flight_us": free_us}
+    return [{"concentration_pct": 2.07, "runs": {"1": dict(one)}, "spinup_s_simulated": spinup_s},
+            {"concentration_pct": c, "runs": {"1": one, "2": dict(one)}, "spinup_s_simulated": spinup_s}]
+
+
+def _lines(bench, capsys, rows, days):
+    bench.print_targets(rows, {"days_longest_first": days})
+    return [x.strip() for x in capsys.readouterr().out.splitlines() if x.strip()]
+
+
+def test_a_run_that_meets_every_target_says_so(bench, capsys):
+    out = _lines(bench, capsys, _rows(3.0e5, 2.9, 1.0), 4.9)
+    assert out[0] == "Targets (issue 19), this run:"
+    assert out[1].endswith("3e+05 grain-steps/s against >= 2.7e+05: met")
+    assert out[2].endswith("contact phase / free flight 2.90 against <= 3: met")
+    assert out[3] == "full-sweep estimate 4.9 days against <= 5: met"
+
+
+def test_each_missed_target_is_marked(bench, capsys):
+    out = _lines(bench, capsys, _rows(1.2e5, 4.4, 1.0), 12.3)
+    assert [x.rsplit(": ", 1)[1] for x in out[1:]] == ["MISSED", "MISSED", "MISSED"]
+    out = _lines(bench, capsys, _rows(3.0e5, 3.1, 1.0), 4.0)  # only the ratio over 3
+    assert [x.rsplit(": ", 1)[1] for x in out[1:]] == ["met", "MISSED", "met"]
+
+
+def test_a_short_spin_up_is_not_comparable(bench, capsys):
+    """A run whose dense layer has not formed must not be reported as meeting a target."""
+    out = _lines(bench, capsys, _rows(3.0e5, 1.8, 1.0, spinup_s=0.05), 4.0)
+    assert "not formed" in out[1]
+    assert [x.rsplit(": ", 1)[1] for x in out[2:]] == ["not comparable"] * 3
+
+
+def test_without_the_densest_case_only_the_estimate_is_judged(bench, capsys):
+    out = _lines(bench, capsys, _rows(3.0e5, 1.0, 1.0)[:1], 4.0)
+    assert out[1] == "C = 3.94 % not measured on one thread in this run"
+    assert out[2].endswith("not comparable")  # its cost was extrapolated from 2.07 %
