@@ -1,12 +1,15 @@
 """Rigid bonded-sphere grains against LAMMPS ``fix rigid`` (no fluid): torque-free
 rotation of an asymmetric clump and a drop onto a plane (benchmarks/shapes_lammps.py
 holds the set-up; tolerances from the observed 3e-6 and 3e-3, see the report there)."""
-import importlib.util
-import pathlib
 import shutil
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parent / "peers"))
+import benchmark_module  # noqa: E402
 
 pytestmark = [
     pytest.mark.lammps,
@@ -15,11 +18,7 @@ pytestmark = [
 
 
 def _bench():
-    path = pathlib.Path(__file__).parents[1] / "benchmarks" / "shapes_lammps.py"
-    spec = importlib.util.spec_from_file_location("shapes_lammps", path)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return benchmark_module.load("shapes_lammps")
 
 
 def test_torque_free_rotation_matches_lammps():

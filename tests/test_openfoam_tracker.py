@@ -10,20 +10,19 @@ tested always.
 """
 from __future__ import annotations
 
-import importlib.util
 import math
 import re
 import shutil
+import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
-_spec = importlib.util.spec_from_file_location("bench_openfoam_tracker",
-                                               ROOT / "benchmarks" / "bench_openfoam_tracker.py")
-bench = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(bench)
+sys.path.insert(0, str(Path(__file__).resolve().parent / "peers"))
+import benchmark_module  # noqa: E402
+
+bench = benchmark_module.load("bench_openfoam_tracker")
 
 HAVE_SOLVER = shutil.which(bench.SOLVER) is not None and shutil.which("blockMesh") is not None
 needs_openfoam = pytest.mark.skipif(not HAVE_SOLVER, reason=f"{bench.SOLVER} / blockMesh not on PATH")

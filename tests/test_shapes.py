@@ -1,11 +1,16 @@
 """Bonded-sphere grains (saltation.grains.shapes): classification, construction, mass
 properties, mixtures, bad input, a priori comparison with ellipsoid and cylinder."""
 import math
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 from saltation.grains import shapes
+
+sys.path.insert(0, str(Path(__file__).resolve().parent / "peers"))
+import benchmark_module  # noqa: E402
 
 
 @pytest.mark.parametrize("axes, cls", [
@@ -103,14 +108,7 @@ def test_mixture_fractions_and_errors():
 
 
 def _apriori_module():
-    import importlib.util
-    import pathlib
-
-    spec = importlib.util.spec_from_file_location(
-        "apriori", pathlib.Path(__file__).parents[1] / "benchmarks" / "shapes_apriori.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return benchmark_module.load("shapes_apriori")
 
 
 @pytest.fixture(scope="module")
