@@ -149,7 +149,15 @@ def main():
         # a fresh cache, set before Numba is imported: re-run this script in it
         env = dict(os.environ, NUMBA_CACHE_DIR=str(work / "profile_perf_cache"), NUMBA_NUM_THREADS="1",
                    SALTATION_SERIAL_COMPILE="1")
-        sys.exit(subprocess.run([sys.executable, __file__, *sys.argv[1:], "--keep", str(work)], env=env).returncode)
+        child = subprocess.Popen([sys.executable, __file__, *sys.argv[1:], "--keep", str(work)], env=env)
+        rc = child.wait()
+        perf_map = Path(f"/tmp/perf-{child.pid}.map")
+        if args.keep:
+            print(f"\n(perf data and object code: {work}; perf map: {perf_map})")
+        else:  # nothing left behind
+            shutil.rmtree(work, ignore_errors=True)
+            perf_map.unlink(missing_ok=True)
+        sys.exit(rc)
 
     import numba
 
@@ -184,7 +192,6 @@ def main():
     print(f"{'share':>6}  function (of the samples in compiled code)")
     for name, k in counts.most_common(args.top):
         print(f"{100 * k / max(jit, 1):5.1f}%  {name}")
-    print(f"\n(perf data, map and object code: {work})")
 
 
 if __name__ == "__main__":
