@@ -616,14 +616,14 @@ def print_targets(rows, est):
     drift."""
     r = next((r for r in rows if "runs" in r and round(r["concentration_pct"], 2) == TARGET_C), None)
     x = r["runs"].get("1") if r else None
-    formed = r is not None and r.get("spinup_s_simulated", 0.0) >= 0.99 * TARGET_SPINUP_S  # to the nearest step
+    formed = r is not None and r["spinup_s_simulated"] >= 0.99 * TARGET_SPINUP_S  # to the nearest step
     mark = lambda ok: ("met" if ok else "MISSED") if formed else "not comparable"  # noqa: E731
     print("\nTargets (issue 19), this run:")
     if x is None:
         print(f"  C = {TARGET_C} % not measured on one thread in this run")
     else:
         if not formed:
-            print(f"  (spin-up {r.get('spinup_s_simulated', 0.0):.3g} s < {TARGET_SPINUP_S:g} s: the dense near-bed layer has "
+            print(f"  (spin-up {r['spinup_s_simulated']:.3g} s < {TARGET_SPINUP_S:g} s: the dense near-bed layer has "
                   f"not formed, so this is not the state the targets are for)")
         gs, ratio = x["grain_steps_per_s"], x["contacts_us"] / x["free_flight_us"]
         print(f"  C = {TARGET_C} %, one thread: {gs:.3g} grain-steps/s against >= {TARGET_GRAIN_STEPS:.3g}: "
