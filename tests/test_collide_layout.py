@@ -12,6 +12,7 @@ from saltation.contacts.phase import (
     RETIRED_SUBSTEPS,
     SUBSTEPPED,
     WAKES,
+    _candidates_first,
     _force_again,
     _grow,
     _make_set,
@@ -184,3 +185,32 @@ def test_a_retired_member_reads_as_if_it_were_active():
     _force_again(cs, 1, s, dt, h, 8.0)
     assert cs.active[1] == ACTIVE
     np.testing.assert_array_equal(cs.cur[1], cs.cur[0])
+
+
+def test_each_block_and_lane_is_numbered_candidates_first():
+    """_candidates_first ("Memory layout"): in a block the candidates (start ≤ 1) take its
+    first set indices, then the members that are only neighbours, each group in its old
+    order; a block cut into lanes (as many candidates as ph.parallel_members, more than one
+    thread: _substep_part) is renumbered so within each lane's range, so that each lane
+    keeps its members. The blocks' ranges are left alone."""
+    rng = np.random.default_rng(3)
+    n = 40
+    gid = rng.permutation(n)[:14]  # members in cell order → grain
+    start = np.full(n, np.inf)
+    start[gid[[1, 3, 4, 5]]] = (0.0, 0.25, 0.5, 1.0)  # block 0: members 0..5, 4 candidates
+    start[gid[[8, 12]]] = (0.0, 0.75)  # block 1: members 6..13, 2 candidates
+    start[gid[[2, 10]]] = 1.5  # not candidates (start > 1)
+    mstart = np.array([0, 6, 14])
+    new = np.concatenate([rng.permutation(6), 6 + rng.permutation(8)])  # cell order → set index
+    ph = make_contact_phase(n)
+    ph.parallel_members[0] = 3
+    cand = start[gid] <= 1.0
+    for threads, ranges in ((1, ((0, 6), (6, 14))), (2, ((0, 3), (3, 6), (6, 14)))):  # block 0 in 2 lanes
+        got = _candidates_first(new, mstart, gid, start, threads, ph)
+        for lo, hi in ranges:
+            members = np.flatnonzero((new >= lo) & (new < hi))
+            by_old = members[np.argsort(new[members])]  # in their old order
+            want = np.concatenate([by_old[cand[by_old]], by_old[~cand[by_old]]])
+            np.testing.assert_array_equal(got[want], np.arange(lo, hi))
+        if threads == 2:  # the test means something: lane 0 holds one candidate of 4
+            assert cand[new < 3].sum() == 1
