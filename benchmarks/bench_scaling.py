@@ -86,24 +86,14 @@ def one_point(args) -> dict:
     """Runs in a child process: warm up, measure one (N, domain) point."""
     import numba
 
-    from saltation.case.schema import load_case, resolve_domain
-    from saltation.engine.simulation import Simulation, _les_box_m, open_flow
-    from saltation.flight.spheres import make_workspace
+    sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+    from bench_dense import build, steps  # noqa: E402 - the benchmarks' folder
 
     numba.set_num_threads(args.threads)
 
-    def build(tables):
-        case = load_case(tables)
-        ds = open_flow(case)
-        case = resolve_domain(case, _les_box_m(ds, case))
-        sim = Simulation(case, ds, "/tmp/bench_scaling_unused", progress=False)
-        st = sim._initial_state()
-        ws = make_workspace(sim.n)
-        sim.stepper.start(st.pos)
-        return sim, ds, st, ws
-
     # warm-up: compiled code and the dataset in memory, then the baseline RSS
-    sim, ds, st, ws = build(case_tables(300, domain=(0.03, 0.015, 0.005), contacts=args.contacts, bed=args.bed))
+    sim, ds, st, ws = build(case_tables(300, domain=(0.03, 0.015, 0.005), contacts=args.contacts, bed=args.bed),
+                            out="/tmp/bench_scaling_unused")
     sim.stepper.advance(ds.arrays, st, ws, 0.0, 3, 0)
     del sim, st, ws
     base_kb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
@@ -111,25 +101,17 @@ def one_point(args) -> dict:
     domain = PAPER_DOMAIN if args.concentration is None else bed_area_domain(args.n, args.concentration)
     tables = case_tables(args.n, domain=domain, contacts=args.contacts, bed=args.bed, threads=args.threads)
     t0 = time.perf_counter()
-    sim, ds, st, ws = build(tables)
+    sim, ds, st, ws = build(tables, out="/tmp/bench_scaling_unused")
     setup_s = time.perf_counter() - t0
     f = ds.arrays
     stepper = sim.stepper
-    done = 0
-    while done < args.spinup:
-        k = stepper.advance(f, st, ws, done * sim.dt, args.spinup - done, done)
-        st.jump_buf_n[:] = 0
-        done += k
+    done = steps(sim, f, st, ws, 0, args.spinup)
     stepper.timers[:] = 0.0
     counters0 = stepper.ph.counters.copy() if len(stepper.ph.counters) else None
     load = os.getloadavg()[0]
     c0 = time.process_time()
     t0 = time.perf_counter()
-    timed = 0
-    while timed < args.steps:
-        k = stepper.advance(f, st, ws, (done + timed) * sim.dt, args.steps - timed, done + timed)
-        st.jump_buf_n[:] = 0
-        timed += k
+    timed = steps(sim, f, st, ws, done, args.steps)
     wall = time.perf_counter() - t0
     cpu = time.process_time() - c0
     peak_kb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
