@@ -56,10 +56,12 @@ def configurations(draw):
 
 
 @settings(max_examples=300, deadline=None)
-@given(configurations())
-def test_no_pair_missed_across_cell_and_periodic_boundaries(config):
+@given(configurations(), st.sampled_from([1.0, 1.0, 0.5, 0.37]))
+def test_no_pair_missed_across_cell_and_periodic_boundaries(config, cell):
+    """Cells of one cutoff (27-cell stencil) and narrower ones (ceil(cutoff / size) layers
+    either side; pairs.rebuild uses half the cutoff)."""
     pos, box, periodic, cutoff = config
-    grid = make_grid(box, cutoff, periodic)
+    grid = make_grid(box, cell * cutoff, periodic)
     found = neighbour_pairs(pos, grid, cutoff)
     pairs = set(map(tuple, found.tolist()))
     assert len(pairs) == len(found)  # no pair listed twice (small grids: stencil deduplicated)

@@ -38,9 +38,10 @@ Arrays (N grains, C = nx·ny·nz cells; the linear cell id is ``(ix·ny + iy)·n
 Neighbour list (``build_neighbour_list``): full (each pair listed from both sides, so a
 kernel that sums each grain's own force is race-free), fixed capacity ``K`` per grain:
 ``nbr`` (N, K) int32 and ``nbr_count`` (N,) (any integer type); the true count is returned so the
-caller can grow ``K`` and rebuild when it was too small. The 27-cell (3×3×3) stencil,
-wrapped on periodic axes and clipped on bounded ones, is visited in a fixed order.
-Cost is linear in N at fixed density.
+caller can grow ``K`` and rebuild when it was too small. The cells may be narrower than
+the cutoff: ceil(cutoff / size) layers either side are searched, wrapped on periodic axes
+and clipped on bounded ones, less those farther than the cutoff. Cost is linear in N at
+fixed density.
 """
 from __future__ import annotations
 
@@ -365,21 +366,37 @@ def _min_image_by(dx, length, inv_length, periodic):
 
 
 @njit(cache=True, no_cfunc_wrapper=True, inline="always")
-def _layer_gaps(x, k, n, size, length, periodic, l0, l1, l2):
-    """Lower bounds on the distance along one axis from a grain at x (in layer k) to each of
-    the stencil layers l0, l1, l2 of ``_layers`` (0 for its own layer): a neighbouring
-    layer is as far as the grain is from the cell's face towards it. Periodic axes of
-    fewer than 3 layers: 0 (a layer is a neighbour on both sides)."""
+def _search_layers(x, n, size, length, periodic, cutoff):
+    """The layers to search along one axis for neighbours of a grain at x, as offsets
+    o_lo..o_hi from its own layer k (layer k + o, taken modulo n when ``wrap``), and f, the
+    grain's distance from its layer's lower face (< 0 or > size for a grain clamped into
+    an end layer of a bounded axis): (k, o_lo, o_hi, wrap, prune, f). A neighbour closer
+    than the cutoff is at most ceil(cutoff / size) layers away. ``prune``: the layers'
+    gaps (_face_gap) bound the distance; not on a periodic axis of fewer than
+    2w + 1 layers, whose layers are each searched once (o from −k to n − 1 − k)."""
+    k = axis_index(x, n, size, length, periodic)
+    w = max(1, int(math.ceil(cutoff / size)))
     if periodic:
-        if n < 3:
-            return 0.0, 0.0, 0.0
         f = (x - length * math.floor(x / length)) - k * size
-        return max(0.0, f), 0.0, max(0.0, size - f)  # layers k − 1, k, k + 1
-    f = x - k * size  # < 0 or > size for a grain clamped into the bottom or top layer
-    g0 = max(0.0, f) if l0 < k else (max(0.0, size - f) if l0 > k else 0.0)
-    g1 = max(0.0, f) if l1 < k else (max(0.0, size - f) if l1 > k else 0.0)
-    g2 = max(0.0, f) if l2 < k else (max(0.0, size - f) if l2 > k else 0.0)
-    return g0, g1, g2
+        if 2 * w + 1 > n:
+            return k, -k, n - 1 - k, False, False, f
+        return k, -w, w, True, True, f
+    return k, max(-w, -k), min(w, n - 1 - k), False, True, x - k * size
+
+
+@njit(cache=True, no_cfunc_wrapper=True, inline="always")
+def _face_gap(f, size, o, prune):
+    """Lower bound on the distance along one axis from a grain at f in its layer (as
+    _search_layers gives it) to any grain filed o layers away: to that layer's near face.
+    The far side of an end layer of a bounded axis is open (clamped grains), its near
+    face is not, so the bound holds for them too."""
+    if not prune:
+        return 0.0
+    if o < 0:
+        return max(0.0, f + (-o - 1) * size)
+    if o > 0:
+        return max(0.0, (size - f) + (o - 1) * size)
+    return 0.0
 
 
 @njit(cache=True, no_cfunc_wrapper=True, parallel=True)
@@ -389,22 +406,27 @@ def build_neighbour_list(pos, grid, cell_of, cell_start, cell_count, order, cuto
     Writes up to K = nbr.shape[1] neighbours per grain into ``nbr[i]`` and the true
     number into ``nbr_count[i]``; returns the largest count (> K: rebuild with a larger
     K, the rows are then truncated). Each row is in id order, whatever the cells: every
-    sum over a row (the contact forces) is then the same whenever and with whatever skin
-    the list was built. Needs ``build_cells`` on the same positions first.
+    sum over a row (the contact forces) is then the same whenever, with whatever skin and
+    on whatever grid the list was built. Needs ``build_cells`` on the same positions and
+    ``grid`` first; the cells may be of any size (w = ceil(cutoff / size) layers either
+    side are searched). At 3.94 % (reduced sweep case, spun up, cutoff 1.96 d) a grain
+    measures 150 others on cells of 1.55 cutoffs, 90 on cells of one cutoff and 49 on
+    cells of half a cutoff, where the 18 (x, y) columns it visits cost more than the
+    fewer distances save: pairs.rebuild searches on cells of one cutoff (LIST_CELL).
 
-    Works cell by cell (parallel over cells; a grain belongs to one cell, so each row is
-    written by one iteration) on a copy of the positions in cell order: marching through
-    the cells reads the stencil's cells and grains from nearby memory whatever the
-    order of the grains in the caller's arrays. A stencil cell farther from the grain than
-    the cutoff (by its distance to the cell's faces, _layer_gaps) is not searched: the
-    cells are sized for the widest skin, ~1.5 cutoffs, and most of the 27 hold no
-    neighbour (the same list, ~2.5× fewer distances).
+    Grain by grain (parallel) in cell order, on a copy of the positions in cell order:
+    consecutive grains read the same cells. Layers farther from the grain than the cutoff
+    (by the distance to their near face, _face_gap) are not searched, first along x, then
+    y, then z; the z layers left of one (x, y) column are consecutive cells, so their
+    grains are one run of ``order`` (two where a periodic axis wraps).
     """
     n = pos.shape[0]
     cap = nbr.shape[1]
     rc2 = cutoff * cutoff
+    lim = rc2 * (1.0 + 1e-9)
     lx, ly, lz = grid.box[0], grid.box[1], grid.box[2]
     px, py, pz = grid.periodic[0], grid.periodic[1], grid.periodic[2]
+    sx, sy, sz = grid.size[0], grid.size[1], grid.size[2]
     ilx, ily, ilz = 1.0 / lx, 1.0 / ly, 1.0 / lz
     nx, ny, nz = grid.n[0], grid.n[1], grid.n[2]
     sorted_pos = np.empty((n, 3))
@@ -413,50 +435,65 @@ def build_neighbour_list(pos, grid, cell_of, cell_start, cell_count, order, cuto
         sorted_pos[q, 0] = pos[i, 0]
         sorted_pos[q, 1] = pos[i, 1]
         sorted_pos[q, 2] = pos[i, 2]
-    n_cells = cell_count.shape[0]
-    largest = np.zeros(n_cells, np.int64)
-    for ci in prange(n_cells):
-        if cell_count[ci] == 0:
-            continue
-        kx, ky, kz = ci // (ny * nz), (ci // nz) % ny, ci % nz
-        mx, x0, x1, x2 = _layers(kx, nx, px)
-        my, y0, y1, y2 = _layers(ky, ny, py)
-        mz, z0, z1, z2 = _layers(kz, nz, pz)
-        most = 0
-        for qi in range(cell_start[ci], cell_start[ci] + cell_count[ci]):
-            i = order[qi]
-            xi, yi, zi = sorted_pos[qi, 0], sorted_pos[qi, 1], sorted_pos[qi, 2]
-            gx0, gx1, gx2 = _layer_gaps(xi, kx, nx, grid.size[0], lx, px, x0, x1, x2)
-            gy0, gy1, gy2 = _layer_gaps(yi, ky, ny, grid.size[1], ly, py, y0, y1, y2)
-            gz0, gz1, gz2 = _layer_gaps(zi, kz, nz, grid.size[2], lz, pz, z0, z1, z2)
-            cnt = 0
-            for s in range(mx * my * mz):
-                g = s % mz
-                b = (s // mz) % my
-                a = s // (mz * my)
-                gap2 = _pick(a, gx0, gx1, gx2) ** 2 + _pick(b, gy0, gy1, gy2) ** 2 + _pick(g, gz0, gz1, gz2) ** 2
-                if gap2 > rc2 * (1.0 + 1e-9):
-                    continue  # no grain of that cell within the cutoff
-                c = (_pick(a, x0, x1, x2) * ny + _pick(b, y0, y1, y2)) * nz + _pick(g, z0, z1, z2)
-                for q in range(cell_start[c], cell_start[c] + cell_count[c]):
-                    if q == qi:
-                        continue
-                    dx = _min_image_by(xi - sorted_pos[q, 0], lx, ilx, px)
-                    dy = _min_image_by(yi - sorted_pos[q, 1], ly, ily, py)
-                    dz = _min_image_by(zi - sorted_pos[q, 2], lz, ilz, pz)
-                    # without a branch on the distance (~15 % of candidates are
-                    # neighbours, unpredictably): every candidate is written, and the
-                    # next one overwrites it unless it was a neighbour (-25 %)
-                    if cnt < cap:
-                        nbr[i, cnt] = order[q]
-                    cnt += 1 if dx * dx + dy * dy + dz * dz < rc2 else 0
-            if cnt <= cap:
-                _sort_row(nbr[i], cnt)
-            nbr_count[i] = cnt
-            if cnt > most:
-                most = cnt
-        largest[ci] = most
-    return largest.max() if n > 0 else 0
+    for qi in prange(n):
+        i = order[qi]
+        xi, yi, zi = sorted_pos[qi, 0], sorted_pos[qi, 1], sorted_pos[qi, 2]
+        kx, ax0, ax1, wx, bx, fx = _search_layers(xi, nx, sx, lx, px, cutoff)
+        ky, ay0, ay1, wy, by, fy = _search_layers(yi, ny, sy, ly, py, cutoff)
+        kz, az0, az1, wz, bz, fz = _search_layers(zi, nz, sz, lz, pz, cutoff)
+        cnt = 0
+        for ox in range(ax0, ax1 + 1):
+            gx2 = _face_gap(fx, sx, ox, bx) ** 2
+            if gx2 > lim:
+                continue
+            jx = kx + ox
+            if wx:
+                jx = jx % nx
+            for oy in range(ay0, ay1 + 1):
+                gxy2 = gx2 + _face_gap(fy, sy, oy, by) ** 2
+                if gxy2 > lim:
+                    continue
+                jy = ky + oy
+                if wy:
+                    jy = jy % ny
+                # the z layers within reach: a range around kz (the gaps grow away from it)
+                z0, z1 = az0, az1
+                while z0 < 0 and gxy2 + _face_gap(fz, sz, z0, bz) ** 2 > lim:
+                    z0 += 1
+                while z1 > 0 and gxy2 + _face_gap(fz, sz, z1, bz) ** 2 > lim:
+                    z1 -= 1
+                row = (jx * ny + jy) * nz
+                lo, hi = kz + z0, kz + z1
+                for part in range(2):
+                    if wz and lo < 0:  # wraps below: the top layers first, then from 0
+                        a, b = (lo + nz, nz - 1) if part == 0 else (0, hi)
+                    elif wz and hi >= nz:  # wraps above
+                        a, b = (lo, nz - 1) if part == 0 else (0, hi - nz)
+                    elif part == 0:
+                        a, b = lo, hi
+                    else:
+                        break
+                    q0 = cell_start[row + a]
+                    q1 = cell_start[row + b] + cell_count[row + b]
+                    for q in range(q0, q1):
+                        if q == qi:
+                            continue
+                        dx = _min_image_by(xi - sorted_pos[q, 0], lx, ilx, px)
+                        dy = _min_image_by(yi - sorted_pos[q, 1], ly, ily, py)
+                        dz = _min_image_by(zi - sorted_pos[q, 2], lz, ilz, pz)
+                        # without a branch on the distance (a minority of candidates are
+                        # neighbours, unpredictably): every candidate is written, and the
+                        # next one overwrites it unless it was a neighbour (-25 %)
+                        if cnt < cap:
+                            nbr[i, cnt] = order[q]
+                        cnt += 1 if dx * dx + dy * dy + dz * dz < rc2 else 0
+        if cnt <= cap:
+            _sort_row(nbr[i], cnt)
+        nbr_count[i] = cnt
+    most = 0
+    for i in range(n):
+        most = max(most, nbr_count[i])
+    return most
 
 
 @njit(cache=True, no_cfunc_wrapper=True, inline="always")
@@ -489,8 +526,6 @@ def neighbour_pairs(pos, grid: CellGrid, cutoff: float) -> np.ndarray:
     """All pairs (i < j) closer than ``cutoff`` (minimum image), as an (M, 2) int64 array
     sorted by i then j: the cell search, for tests and diagnostics."""
     pos = np.ascontiguousarray(pos, dtype=np.float64)
-    if np.any(grid.size < cutoff * (1.0 - 1e-12)):
-        raise ValueError(f"cells {grid.size.tolist()} are narrower than the cutoff {cutoff!r}")
     n = len(pos)
     cell_of, cell_start, cell_count, order = allocate_cells(n, grid)
     build_cells(pos, grid, cell_of, cell_start, cell_count, order)

@@ -138,7 +138,16 @@ from numba import njit, prange
 
 from ..grains.refs import struct_ref
 from ..physics.contact_law import lever_torque, sphere_contact_velocity, spring_dashpot
-from .cells import CellGrid, allocate_cells, build_cells, build_neighbour_list, make_grid, min_image, stencil_cells
+from .cells import (
+    CellGrid,
+    allocate_cells,
+    build_cells,
+    build_neighbour_list,
+    grid_shape,
+    make_grid,
+    min_image,
+    stencil_cells,
+)
 
 __all__ = [
     "ContactModel",
@@ -171,6 +180,8 @@ LEVER_RADIUS = 1  # lever arm d/2, as LAMMPS gran/hooke/history
 
 HARD_PUSH_SWEEPS = 8  # Gauss–Seidel sweeps of push_apart (the hard-sphere option)
 _CHUNKS = 64  # fixed reduction chunks: sums do not depend on the thread count
+LIST_CELL = 1.0  # cells of the list search, in cutoffs (_search_cells)
+MAX_SEARCH_CELLS = 8  # at most this many search cells per grain (_search_cells)
 
 
 class ContactModel(NamedTuple):
@@ -309,13 +320,40 @@ def _transfer_history(nbr, nbr_count, shear, touch, nbr2, nbr_count2, shear2, to
 
 
 @njit(cache=True, no_cfunc_wrapper=True)
+def _search_cells(pos, g, cutoff):
+    """Cells of LIST_CELL cutoffs for the list search (build_neighbour_list), sorted at
+    ``pos``: (grid, cell_of, cell_start, cell_count, order). The list's own cells are
+    sized for the widest skin (stepping.Stepper.start: ~1.5 cutoffs), and a search on them
+    measures 150 grains per grain at 3.94 %, on these 90 (the list build −10 % against
+    the same run's free flight, the sort of these cells included). Coarser, never finer,
+    where they would outnumber the grains MAX_SEARCH_CELLS to one."""
+    n = pos.shape[0]
+    cut = LIST_CELL * cutoff
+    shape, size = grid_shape(g.box, cut)
+    while shape[0] * shape[1] * shape[2] > MAX_SEARCH_CELLS * max(n, 1):
+        cut *= 1.25
+        shape, size = grid_shape(g.box, cut)
+    fine = CellGrid(shape, size, g.box, g.periodic)
+    cells = shape[0] * shape[1] * shape[2]
+    cell_of = np.empty(n, np.int64)
+    cell_start = np.empty(cells, np.int64)
+    cell_count = np.empty(cells, np.int64)
+    order = np.empty(n, np.int64)
+    build_cells(pos, fine, cell_of, cell_start, cell_count, order)
+    return fine, cell_of, cell_start, cell_count, order
+
+
+@njit(cache=True, no_cfunc_wrapper=True)
 def rebuild(pos, cl):
     """Rebuild cells and neighbour list at ``pos``, carrying the contact history over;
-    returns the ContactList to use from now on (buffers swapped, or grown)."""
+    returns the ContactList to use from now on (buffers swapped, or grown). The list is
+    searched on its own narrower cells (_search_cells); its rows are in id order, so it
+    is the same list as on the list's cells."""
     g = cl.grid
     build_cells(pos, g, cl.cell_of, cl.cell_start, cl.cell_count, cl.order)
+    fine, f_of, f_start, f_count, f_order = _search_cells(pos, g, cl.cutoff)
     nbr2, cnt2, shear2, touch2 = cl.nbr2, cl.nbr_count2, cl.shear2, cl.touch2
-    most = build_neighbour_list(pos, g, cl.cell_of, cl.cell_start, cl.cell_count, cl.order, cl.cutoff, nbr2, cnt2)
+    most = build_neighbour_list(pos, fine, f_of, f_start, f_count, f_order, cl.cutoff, nbr2, cnt2)
     spare_nbr, spare_cnt, spare_shear, spare_touch = cl.nbr, cl.nbr_count, cl.shear, cl.touch
     n = pos.shape[0]
     if most > nbr2.shape[1]:
@@ -324,7 +362,7 @@ def rebuild(pos, cl):
         cnt2 = np.zeros(n, np.int32)
         shear2 = np.zeros((n, k, 3))
         touch2 = np.zeros((n, k), np.uint8)
-        build_neighbour_list(pos, g, cl.cell_of, cl.cell_start, cl.cell_count, cl.order, cl.cutoff, nbr2, cnt2)
+        build_neighbour_list(pos, fine, f_of, f_start, f_count, f_order, cl.cutoff, nbr2, cnt2)
         _transfer_history(cl.nbr, cl.nbr_count, cl.shear, cl.touch, nbr2, cnt2, shear2, touch2)
         spare_nbr = np.zeros((n, k), np.int32)
         spare_cnt = np.zeros(n, np.int32)
