@@ -1304,7 +1304,7 @@ def _quiet_until(cs, a, s, dt, h, d, blk):
             xb, ub, xb1, ub1 = _rest_of_path(cs, b, s, dt, c)
             r2, rd, dd, w0, w1 = _chord_add(r2, rd, dd, w0, w1, (xa - xb) - image[k, c], (xa1 - xa) - (xb1 - xb),
                                             ua - ub, ua1 - ub1, span)
-        first = min(first, _chord_touch(r2, rd, dd, _bulge(w0, w1, span), d))
+        first = min(first, _chord_touch(r2, rd, dd, _bulge(w0, w1), d))
         if first <= least:
             return 0.0
     return s + first * (1.0 - s)
@@ -1501,20 +1501,20 @@ def _chord(x0i, x1i, u0i, u1i, x0j, x1j, u0j, u1j, box, per, dt):
     for c in range(3):
         r2, rd, dd, w0, w1 = _chord_add(r2, rd, dd, w0, w1, min_image(x0i[c] - x0j[c], box[c], per[c]),
                                         (x1i[c] - x0i[c]) - (x1j[c] - x0j[c]), u0i[c] - u0j[c], u1i[c] - u1j[c], dt)
-    return r2, rd, dd, _bulge(w0, w1, dt)
+    return r2, rd, dd, _bulge(w0, w1)
 
 
 @njit(cache=True, no_cfunc_wrapper=True, inline="always", error_model="numpy")
 def _chord_add(r2, rd, dd, w0, w1, e, dl, du0, du1, dt):
     """_chord's sums with one axis added: e of r₀, dl of Δ, du0 and du1 of the relative
-    velocity at the two ends."""
-    return r2 + e * e, rd + e * dl, dd + dl * dl, w0 + (du0 - dl / dt) ** 2, w1 + (du1 - dl / dt) ** 2
+    velocity at the two ends; w0, w1: of |w|Δt, without a division (_bulge)."""
+    return r2 + e * e, rd + e * dl, dd + dl * dl, w0 + (du0 * dt - dl) ** 2, w1 + (du1 * dt - dl) ** 2
 
 
 @njit(cache=True, no_cfunc_wrapper=True, inline="always", error_model="numpy")
-def _bulge(w0, w1, dt):
-    """_chord's bound B = (4/27)Δt(|w₀| + |w₁|) from the squares of |w₀|, |w₁|."""
-    return (4.0 / 27.0) * dt * (math.sqrt(w0) + math.sqrt(w1))
+def _bulge(w0, w1):
+    """_chord's bound B = (4/27)Δt(|w₀| + |w₁|) from the squares of |w₀|Δt, |w₁|Δt."""
+    return (4.0 / 27.0) * (math.sqrt(w0) + math.sqrt(w1))
 
 
 @njit(cache=True, no_cfunc_wrapper=True, inline="always", error_model="numpy")
