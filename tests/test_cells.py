@@ -65,6 +65,8 @@ def test_no_pair_missed_across_cell_and_periodic_boundaries(config, cell):
     found = neighbour_pairs(pos, grid, cutoff)
     pairs = set(map(tuple, found.tolist()))
     assert len(pairs) == len(found)  # no pair listed twice (small grids: stencil deduplicated)
+    # rows in id order (the contact forces sum over them): sorted by i, then j
+    assert np.array_equal(found, found[np.lexsort((found[:, 1], found[:, 0]))])
     assert pairs == brute_force_pairs(pos, box, periodic, cutoff)
 
 
