@@ -58,8 +58,8 @@ def configurations(draw):
 @settings(max_examples=300, deadline=None)
 @given(configurations(), st.sampled_from([1.0, 1.0, 0.5, 0.37]))
 def test_no_pair_missed_across_cell_and_periodic_boundaries(config, cell):
-    """Cells of one cutoff (27-cell stencil) and narrower ones (ceil(cutoff / size) layers
-    either side; pairs.rebuild uses half the cutoff)."""
+    """Cells of one cutoff (27-cell stencil, pairs.rebuild's search) and narrower ones
+    (ceil(cutoff / size) layers either side)."""
     pos, box, periodic, cutoff = config
     grid = make_grid(box, cell * cutoff, periodic)
     found = neighbour_pairs(pos, grid, cutoff)

@@ -103,10 +103,11 @@ kept for the deviations of the sub-steps (at 3.94 % the largest deviation in a s
 0.12 d on average, 0.18 d at most in 100 steps). Saltation carries the whole layer
 downstream at ~10 u*, 0.2 d per step of 0.02 d/u*: without c the list was rebuilt every
 step at 3.94 % and 2.07 %, with it every other step (200 → 101 rebuilds in 200 steps,
-the same bits). A rebuild is one counting sort and one cell sweep, but not cheap in the
-dense layer: cells sized for a widened skin hold ~28 grains each there (135 candidates
-per grain for 20 neighbours), and it costs ~1 µs per grain-step, about the RK4 step
-(``ContactPhase.clocks`` times every part of the phase).
+the same bits). A rebuild is two counting sorts (the list's cells, the search's) and
+one sweep, but not cheap in the dense layer: the search (on its own cells of one
+cutoff, pairs._search_cells) measures ~90 grains per grain for 20 neighbours at 3.94 %,
+and the list costs ~0.65 µs per grain-step, half the RK4 step (``ContactPhase.clocks``
+times every part of the phase).
 If a grain moves more than s/2 in one step, the skin is widened to 2.5× its
 reach, up to what the cells allow (stepping.Stepper makes them wide enough for twice the
 default skin, which covers 20 u*). A grain still faster, or deflected beyond the skin, is
