@@ -138,6 +138,30 @@ def test_blocks_on_two_threads_give_the_one_thread_and_single_sweep_result():
         np.testing.assert_array_equal(runs[a][2].counters[:PARALLEL_BLOCKS], runs[b][2].counters[:PARALLEL_BLOCKS])
 
 
+def test_two_threads_leave_a_large_block_on_one_thread_by_default():
+    """Lanes have neither retirement nor the lists, which save more than a second thread
+    gives ("Blocks on several threads"): a block is cut into lanes only from LANE_THREADS
+    threads; on two, it is sub-stepped as on one — the same bits and the same counters,
+    retired sub-steps included."""
+    from saltation.contacts.phase import LANE_THREADS, PARALLEL_MEMBERS, RETIRED_SUBSTEPS, _lanes, make_contact_phase
+
+    ph = make_contact_phase(4)
+    assert LANE_THREADS == 3
+    assert _lanes(2, PARALLEL_MEMBERS, ph) == 1 and _lanes(LANE_THREADS, PARALLEL_MEMBERS, ph) == LANE_THREADS
+    assert _lanes(LANE_THREADS, PARALLEL_MEMBERS - 1, ph) == 1
+    box, pos, vel = _layer(12.0, 5)
+    runs = {t: _run(pos, vel, 10 ** 9, box, 0.6, 5, 0.02, threads=t, parallel_members=(6, LANE_THREADS))
+            for t in (1, TWO_THREADS)}
+    lanes = _run(pos, vel, 10 ** 9, box, 0.6, 5, 0.02, threads=TWO_THREADS, parallel_members=(6, 2))
+    one, two = runs[1], runs[TWO_THREADS]
+    _same(two, one)
+    _same(lanes, one)
+    np.testing.assert_array_equal(two[2].counters, one[2].counters)
+    assert one[2].counters[RETIRED_SUBSTEPS] > 0 and two[2].counters[PARALLEL_BLOCKS] == 0
+    if TWO_THREADS > 1:  # the test means something: cut into lanes on two, the block retires nobody
+        assert lanes[2].counters[PARALLEL_BLOCKS] > 0 and lanes[2].counters[RETIRED_SUBSTEPS] == 0
+
+
 def test_automatic_threads_share_soft_contacts_from_a_few_hundred_grains(tmp_path):
     # run.threads = 0: a run with soft contacts uses all cores from PARALLEL_MEMBERS grains
     # (a dilute run without contacts stays on one thread below SERIAL_BELOW)

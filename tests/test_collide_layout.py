@@ -44,8 +44,8 @@ def run_contact_phase(pos0, vel0, steps=3, dt=0.02, n_sub=128, box=(12.0, 8.0, 1
         ph.block_members[0] = block_members
     if block_slack is not None:
         ph.block_slack[:] = block_slack
-    if parallel_members is not None:
-        ph.parallel_members[0] = parallel_members
+    if parallel_members is not None:  # (candidates, threads); candidates alone: lanes from two threads on
+        ph.parallel_members[:] = parallel_members if isinstance(parallel_members, tuple) else (parallel_members, 2)
     if near_slack is not None:
         ph.near_slack[0] = near_slack
     if retire_backoff is not None:
@@ -190,8 +190,8 @@ def test_a_retired_member_reads_as_if_it_were_active():
 def test_each_block_and_lane_is_numbered_candidates_first():
     """_candidates_first ("Memory layout"): in a block the candidates (start ≤ 1) take its
     first set indices, then the members that are only neighbours, each group in its old
-    order; a block cut into lanes (as many candidates as ph.parallel_members, more than one
-    thread: _substep_part) is renumbered so within each lane's range, so that each lane
+    order; a block cut into lanes (as many candidates and threads as ph.parallel_members:
+    _substep_part) is renumbered so within each lane's range, so that each lane
     keeps its members. The blocks' ranges are left alone."""
     rng = np.random.default_rng(3)
     n = 40
@@ -203,7 +203,7 @@ def test_each_block_and_lane_is_numbered_candidates_first():
     mstart = np.array([0, 6, 14])
     new = np.concatenate([rng.permutation(6), 6 + rng.permutation(8)])  # cell order → set index
     ph = make_contact_phase(n)
-    ph.parallel_members[0] = 3
+    ph.parallel_members[:] = (3, 2)  # lanes from 3 candidates and 2 threads
     cand = start[gid] <= 1.0
     for threads, ranges in ((1, ((0, 6), (6, 14))), (2, ((0, 3), (3, 6), (6, 14)))):  # block 0 in 2 lanes
         got = _candidates_first(new, mstart, gid, start, threads, ph)

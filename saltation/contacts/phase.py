@@ -277,14 +277,21 @@ every join and retirement: 4.03–4.08, the test per member costing more than ``
 
 Blocks on several threads. In the dense cases the near-bed layer is one giant group that
 no slack cuts (3.94 %: one or two blocks per step), so blocks are not what is shared
-between threads. Instead, on more than one thread (``soft_contact_phase(..., threads)``)
-a block of at least PARALLEL_MEMBERS candidates runs each part of each sub-step — half
-kick and drift, forces, half kick — over its members in parallel, one contiguous range
-of members per thread (``_substep_part``); the joins and wake-ups between the parts stay
-serial. A member's force is its own sum over its own row (both grains of a pair compute
-it) and every other write is to its own row, so the result is the same bits on any
-thread count (tests/test_collide_blocks.py). ``counters[PARALLEL_BLOCKS]`` counts such
-blocks (summary.json "timing").
+between threads. Instead, on LANE_THREADS = 3 or more threads (``soft_contact_phase(...,
+threads)``) a block of at least PARALLEL_MEMBERS candidates runs each part of each
+sub-step — half kick and drift, forces, half kick — over its members in parallel, one
+contiguous range of members (a *lane*) per thread (``_substep_part``); the joins and
+wake-ups between the parts stay serial. A member's force is its own sum over its own row
+(both grains of a pair compute it) and every other write is to its own row, so the result
+is the same bits on any thread count (tests/test_collide_blocks.py).
+``counters[PARALLEL_BLOCKS]`` counts such blocks (summary.json "timing"). Lanes have
+neither retirement nor the lists, which save more than a second thread gives: on two
+threads (reduced sweep cases after spin-up, 100 steps, lanes and one thread alternated,
+two rounds) the sub-steps took 3.75 and 4.28 µs per grain-step in lanes against 3.67 and
+4.04 on one thread at 3.94 %, and 2.94 and 2.86 against 2.06 and 2.14 at 2.07 %. So on two
+threads the sub-steps run on one (the list, the engagement test and the free flight still
+run on both); from three on, lanes are expected to win (not measured: this machine has
+two cores). ``ph.parallel_members`` holds both thresholds.
 
 Statistics (per grain, race-free): ``cl.collisions`` (contacts begun), ``cl.max_overlap``,
 and here ``contact_substeps`` (sub-steps spent in each contact, summed) and
@@ -336,7 +343,8 @@ NEAR_SLACK = 0.1  # d: deviation each grain of a pair may have before a far pair
 UNBLOCKED_STEPS = 16  # steps run as one block after the blocks came out as one giant block ("Blocks")
 RETIRE_BACKOFF = 8  # sub-steps before a member that could not retire tries again ("Retired members")
 QUIET_MIN = 2  # sub-steps: the least quiet time worth retiring a member for
-PARALLEL_MEMBERS = 256  # candidates: a block this large runs its sub-steps on all threads
+PARALLEL_MEMBERS = 256  # candidates: a block this large runs its sub-steps on all threads ...
+LANE_THREADS = 3  # ... when there are this many ("Blocks on several threads")
 MERGED_PASSES = 3  # passes redone with the conflicting groups joined before one that is a single block
 BC_MIN_JUMP_DURATION, BC_MIN_JUMP_HEIGHT = 7, 8  # slots of BedContext.params (bed/jumps.py)
 BED_SLOTS = 4  # bed spheres one grain can touch at once (3 in a hollow of the packed layer)
@@ -419,7 +427,8 @@ class ContactPhase(NamedTuple):
     block_members: np.ndarray  # (1,) int64 most members per block (BLOCK_MEMBERS; "Blocks")
     block_slack: np.ndarray  # (5,) float64 σ (d) of candidates and of the other members (BLOCK_SLACK,
     #                          QUIET_SLACK), the same inside giant groups, giant group size (GIANT_*; "Blocks")
-    parallel_members: np.ndarray  # (1,) int64 fewest candidates of a block run on all threads (PARALLEL_MEMBERS)
+    parallel_members: np.ndarray  # (2,) int64 fewest candidates of a block run on all threads, and fewest threads
+    #                               for it (PARALLEL_MEMBERS, LANE_THREADS)
     near_slack: np.ndarray  # (1,) float64 σ (d) of the near-pair filter (NEAR_SLACK; inf: no filter)
     retire_backoff: np.ndarray  # (1,) float64 RETIRE_BACKOFF (sub-steps; 0: members never retire)
     unblocked: np.ndarray  # (2,) int64 the phase runs as one block before step unblocked[0], set to
@@ -436,7 +445,7 @@ def make_contact_phase(n: int, block_members: int = BLOCK_MEMBERS,
         np.zeros(n, np.uint8), np.zeros(n, np.int64), np.zeros(1, np.int64), np.zeros(n), np.zeros((n, 3)),
         np.zeros(n), np.zeros(n), np.zeros(n), np.full(n, -1, np.int64), np.zeros(n), np.zeros(n, np.int64),
         np.zeros(n), np.zeros(N_COUNTERS, np.int64), np.array([block_members], np.int64),
-        np.array([float(x) for x in block_slack]), np.array([PARALLEL_MEMBERS], np.int64),
+        np.array([float(x) for x in block_slack]), np.array([PARALLEL_MEMBERS, LANE_THREADS], np.int64),
         np.array([NEAR_SLACK]), np.array([float(RETIRE_BACKOFF)]), np.array([0, UNBLOCKED_STEPS], np.int64),
         np.zeros(N_CLOCKS if profile else 0),
     )
@@ -1769,8 +1778,9 @@ def _gather(x0w, st, cl, bc, ph, dt, d, blocked, forced, cs, filtered, threads):
 
 @njit(cache=True, no_cfunc_wrapper=True, inline="always")
 def _lanes(threads, n_cand, ph):
-    """On how many threads a block of ``n_cand`` candidates runs (_substep_part)."""
-    return threads if n_cand >= ph.parallel_members[0] else 1
+    """On how many threads a block of ``n_cand`` candidates runs (_substep_part; "Blocks on
+    several threads")."""
+    return threads if n_cand >= ph.parallel_members[0] and threads >= ph.parallel_members[1] else 1
 
 
 @njit(cache=True, no_cfunc_wrapper=True)
@@ -2251,7 +2261,7 @@ def soft_contact_phase(state, x0w, model, cl, phase, bed, t0, step, dt, n_sub, c
         n_blocks = mstart.shape[0] - 1
         if blocking and passes == 0 and 2 * _largest_block(mstart) > mstart[n_blocks]:
             ph.unblocked[0] = step + ph.unblocked[1]  # one block holds most members
-        for b in range(n_blocks):  # one after another; a large one on all threads (_substep_part)
+        for b in range(n_blocks):  # one after another; a large one on all threads from LANE_THREADS (_lanes)
             c0, c1 = cstart[b], cstart[b + 1]
             if c1 == c0:
                 continue

@@ -349,7 +349,8 @@ class Stepper:
             # how the contact phase shared its work between threads: execution, not results
             out["contact_blocks_in_parallel"] = int(self.ph.counters[phase.PARALLEL_BLOCKS])
             out["blocks_in_parallel_are"] = ("blocks whose sub-steps ran over their members on all threads "
-                                             "(threads > 1, at least contacts/phase.PARALLEL_MEMBERS candidates)")
+                                             "(at least contacts/phase.LANE_THREADS threads and PARALLEL_MEMBERS "
+                                             "candidates)")
             out["contact_phases_redone_unfiltered"] = int(self.ph.counters[phase.REDONE_FAR])
             out["redone_unfiltered_is"] = ("contact phases redone without the near-pair filter because a pair it "
                                            "had not looked at came near (contacts/phase.py, \"Near pairs\"); the "
