@@ -290,8 +290,14 @@ threads (reduced sweep cases after spin-up, 100 steps, lanes and one thread alte
 two rounds) the sub-steps took 3.75 and 4.28 µs per grain-step in lanes against 3.67 and
 4.04 on one thread at 3.94 %, and 2.94 and 2.86 against 2.06 and 2.14 at 2.07 %. So on two
 threads the sub-steps run on one (the list, the engagement test and the free flight still
-run on both); from three on, lanes are expected to win (not measured: this machine has
-two cores). ``ph.parallel_members`` holds both thresholds.
+run on both). Lanes that keep lists and retire members (decided after every lane's forces,
+each checking the partners that may retire too) gave the same bits but were no faster on
+two threads: the sub-steps over the free flight of the same run 4.88 against 3.56 (lanes
+without retirement) at 2.07 %, 5.06 against 4.99 at 3.94 % (one run each on a VM
+whose speed drifted; why is not known: the parallel launches, ~2 µs each, four per
+sub-step, are ~0.8 of the ~4.5 ms the sub-steps take per step at 2.07 %). From three
+threads on, lanes may win: not measured (this machine has two cores).
+``ph.parallel_members`` holds both thresholds.
 
 Statistics (per grain, race-free): ``cl.collisions`` (contacts begun), ``cl.max_overlap``,
 and here ``contact_substeps`` (sub-steps spent in each contact, summed) and

@@ -203,9 +203,11 @@ class Simulation:
 
     # ------------------------------------------------------------------ helpers
     SERIAL_BELOW = 2000  # grains: below this a step is too short to share between threads
-    # ... unless soft contacts: from this many grains the sub-steps of the near-bed layer are
-    # worth sharing (contacts/phase.PARALLEL_MEMBERS; benchmarks/bench_dense.py, 2 threads
-    # against 1: 364 grains at 0.52 % 1.18x, 1 450 at 2.07 % 1.56x, 2 760 at 3.94 % 1.66x)
+    # ... unless soft contacts: from this many grains the passes of the contact phase over
+    # all grains (list, engagement test) are worth sharing, and the sub-steps of a large
+    # block too from contacts/phase.LANE_THREADS threads (benchmarks/bench_dense.py, 2
+    # threads against 1, two runs: 364 grains at 0.52 % 1.20x and 1.35x, 1 450 at 2.07 %
+    # 1.29x and 1.26x, 2 760 at 3.94 % 1.12x and 1.12x)
     SERIAL_BELOW_SOFT = PARALLEL_MEMBERS
 
     def threads(self) -> int:
