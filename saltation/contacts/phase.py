@@ -286,15 +286,16 @@ wake-ups between the parts stay serial. A member's force is its own sum over its
 is the same bits on any thread count (tests/test_collide_blocks.py).
 ``counters[PARALLEL_BLOCKS]`` counts such blocks (summary.json "timing"). Lanes have
 neither retirement nor the lists, which save more than a second thread gives: on two
-threads (reduced sweep cases after spin-up, 100 steps, lanes and one thread alternated,
-two rounds) the sub-steps took 3.75 and 4.28 µs per grain-step in lanes against 3.67 and
-4.04 on one thread at 3.94 %, and 2.94 and 2.86 against 2.06 and 2.14 at 2.07 %. So on two
+threads (reduced sweep cases after spin-up, 100 steps, lanes on and off alternated, two
+rounds) the sub-steps took 3.75 and 4.28 µs per grain-step in lanes against 3.67 and 4.04
+with the block on one of the threads at 3.94 %, and 2.94 and 2.86 against 2.06 and 2.14 at
+2.07 %. So on two
 threads the sub-steps run on one (the list, the engagement test and the free flight still
 run on both). Lanes that keep lists and retire members (decided after every lane's forces,
 each checking the partners that may retire too) gave the same bits but were no faster on
 two threads: the sub-steps over the free flight of the same run 4.88 against 3.56 (lanes
 without retirement) at 2.07 %, 5.06 against 4.99 at 3.94 % (one run each on a VM
-whose speed drifted; why is not known: the parallel launches, ~2 µs each, four per
+whose speed drifted; why is not known: the parallel launches, ~2 µs each, three per
 sub-step, are ~0.8 of the ~4.5 ms the sub-steps take per step at 2.07 %). From three
 threads on, lanes may win: not measured (this machine has two cores).
 ``ph.parallel_members`` holds both thresholds.
