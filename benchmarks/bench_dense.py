@@ -605,18 +605,14 @@ def print_table(rows, args):
                   f"{r1['contacts_ns_per_grain_substep']:.0f} ns per grain x sub-step of all grains")
             drift = lam.get("ours_before_after")
             if drift is not None:
-                print(f"  ours again right after LAMMPS: contact phase {lam['ours_after']['contacts_s']:.2f} s "
-                      f"({drift:.2f}x the first timing); the ratios below use the mean of the two")
-                if not 0.85 <= drift <= 1.0 / 0.85:
-                    print("  WARNING: the machine's speed changed during the comparison (ours before and after "
-                          "LAMMPS differ by more than 15 %): the ratios are not reliable in this run")
+                _bracket(f"ours again right after LAMMPS: contact phase {lam['ours_after']['contacts_s']:.2f} s "
+                         f"({drift:.2f}x the first timing); the ratios below use the mean of the two", drift,
+                         "ours before and after LAMMPS")
             again = lam.get("lammps_again_over_first")
             if again is not None:
-                print(f"  LAMMPS again after that: {lam['ns_per_atom_step_again']:.0f} ns per atom-step ({again:.2f}x "
-                      f"the first); the ratios below use the mean of the two, {lam['ns_per_atom_step']:.0f} ns")
-                if not 0.85 <= again <= 1.0 / 0.85:
-                    print("  WARNING: the machine's speed changed during the comparison (LAMMPS's two runs differ "
-                          "by more than 15 %): the ratios are not reliable in this run")
+                _bracket(f"LAMMPS again after that: {lam['ns_per_atom_step_again']:.0f} ns per atom-step ({again:.2f}x "
+                         f"the first); the ratios below use the mean of the two, {lam['ns_per_atom_step']:.0f} ns",
+                         again, "LAMMPS's two runs")
             elif "again_error" in lam:
                 print(f"  LAMMPS again: {lam['again_error']}")
             print(f"  ratio ours/LAMMPS per engaged grain-sub-step: {lam.get('ratio_per_engaged', float('nan')):.3g}"
@@ -625,6 +621,15 @@ def print_table(rows, args):
                   f"counterpart of): {lam.get('ratio_substeps_per_engaged', float('nan')):.3g}")
             print(f"  ratio ours/LAMMPS per grain x sub-step (all grains, same physical time): "
                   f"{lam['ratio_per_grain']:.3g}   (< 1: ours is cheaper)")
+
+
+def _bracket(line, factor, whose):
+    """A timing repeated to bracket the other code's, and a warning when the two differ by
+    more than 15 % (the machine's speed changed: the ratios then measure the machine)."""
+    print(f"  {line}")
+    if not 0.85 <= factor <= 1.0 / 0.85:
+        print(f"  WARNING: the machine's speed changed during the comparison ({whose} differ by more than 15 %): "
+              "the ratios are not reliable in this run")
 
 
 def print_estimate(est):
