@@ -247,8 +247,8 @@ forced again) work them out from its path and deviation (_velocity_of, _spin_of:
 operations of _set_path, so the same bits). One that may not retire tries again
 RETIRE_BACKOFF = 8 sub-steps later (``ph.retire_backoff``; 0: never), as does one forced
 again when its time is up. The decisions read the partners' states, so they are made as
-_forces goes through the members one after another; on several threads (a block cut into
-lanes, below) no member retires.
+_forces goes through the members one after another; in a block cut into lanes (from
+LANE_THREADS threads, "Blocks on several threads") no member retires.
 ``counters[RETIRED_SUBSTEPS]`` counts the retired grain-sub-steps (summary.json "timing").
 At 3.94 % (reduced sweep case, after spin-up, 200 steps, one thread): retired for the rest
 of the step only, 13.4 of 23.6 M grain-sub-steps retired, the sub-steps 4.33 → 3.80 µs per
@@ -263,8 +263,8 @@ whose speed drifted by 2×; benchmarks/bench_dense.py).
 Lists instead of scans. In the dense layer a block holds ~2 750 members, of which ~400 are
 forced at a sub-step, ~500 retired and the rest not sub-stepped (their ``at`` only): a
 pass that goes through every member to find the forced ones pays a test per member, and
-its branch, taken for a scattered third of them, is mispredicted often. So on one thread
-the kick-drift pass, which goes through every member anyway, lists the active ones in
+its branch, taken for a scattered third of them, is mispredicted often. So in a block not
+cut into lanes the kick-drift pass, which goes through every member anyway, lists the active ones in
 member order (``go``), and the force pass goes through that list; the force pass lists
 the members that touched one not sub-stepped (``flagged``), and the wake-up's first round
 goes through those instead of the whole block. The same members in the same order: the
@@ -289,15 +289,14 @@ neither retirement nor the lists, which save more than a second thread gives: on
 threads (reduced sweep cases after spin-up, 100 steps, lanes on and off alternated, two
 rounds) the sub-steps took 3.75 and 4.28 µs per grain-step in lanes against 3.67 and 4.04
 with the block on one of the threads at 3.94 %, and 2.94 and 2.86 against 2.06 and 2.14 at
-2.07 %. So on two
-threads the sub-steps run on one (the list, the engagement test and the free flight still
-run on both). Lanes that keep lists and retire members (decided after every lane's forces,
-each checking the partners that may retire too) gave the same bits but were no faster on
-two threads: the sub-steps over the free flight of the same run 4.88 against 3.56 (lanes
-without retirement) at 2.07 %, 5.06 against 4.99 at 3.94 % (one run each on a VM
-whose speed drifted; why is not known: the parallel launches, ~2 µs each, three per
-sub-step, are ~0.8 of the ~4.5 ms the sub-steps take per step at 2.07 %). From three
-threads on, lanes may win: not measured (this machine has two cores).
+2.07 %. So on two threads the sub-steps run on one (the list, the engagement test and the
+free flight still run on both). Lanes that keep lists and retire members (decided after
+every lane's forces, each checking the partners that may retire too) gave the same bits
+but were no faster on two threads: the sub-steps over the free flight of the same run 4.88
+against 3.56 (lanes without retirement) at 2.07 %, 5.06 against 4.99 at 3.94 % (one run
+each on a VM whose speed drifted; why is not known: the parallel launches, ~2 µs each,
+three per sub-step, are ~0.8 ms of the ~4.5 ms the sub-steps take per step at 2.07 %).
+From three threads on, lanes may win: not measured (this machine has two cores).
 ``ph.parallel_members`` holds both thresholds.
 
 Statistics (per grain, race-free): ``cl.collisions`` (contacts begun), ``cl.max_overlap``,
