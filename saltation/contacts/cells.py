@@ -104,9 +104,11 @@ def make_grid(box, min_size, periodic=(True, False, True), max_cells=None) -> Ce
     return CellGrid(n, box / n, box, per)
 
 
-def allocate_cells(n_particles: int, grid: CellGrid):
-    """(cell_of, cell_start, cell_count, order) arrays for ``build_cells``."""
-    nc = int(np.prod(grid.n))
+@njit(cache=True, no_cfunc_wrapper=True)
+def allocate_cells(n_particles, grid):
+    """(cell_of, cell_start, cell_count, order) arrays for ``build_cells`` (compiled: the
+    list search sizes its own cells at every rebuild, pairs._search_cells)."""
+    nc = grid.n[0] * grid.n[1] * grid.n[2]
     return (np.zeros(n_particles, np.int64), np.zeros(nc, np.int64), np.zeros(nc, np.int64),
             np.zeros(n_particles, np.int64))
 
@@ -124,10 +126,16 @@ def grid_shape(box, cut):
 
 
 @njit(cache=True, no_cfunc_wrapper=True, inline="always")
+def wrapped(x, length):
+    """x taken into [0, length] on a periodic axis (length itself where x rounds up to it)."""
+    return x - length * math.floor(x / length)
+
+
+@njit(cache=True, no_cfunc_wrapper=True, inline="always")
 def axis_index(x, n, size, length, periodic):
     """Cell layer of coordinate x on an axis of n cells of ``size`` (wrapped or clamped)."""
     if periodic:
-        s = x - length * math.floor(x / length)
+        s = wrapped(x, length)
         k = int(s / size)
         if k >= n:  # s rounded up to L
             k = n - 1
@@ -374,7 +382,7 @@ def _search_layers(x, n, size, length, periodic, cutoff):
     k = axis_index(x, n, size, length, periodic)
     w = max(1, int(math.ceil(cutoff / size)))
     if periodic:
-        f = (x - length * math.floor(x / length)) - k * size
+        f = wrapped(x, length) - k * size
         if 2 * w + 1 > n:
             return k, -k, n - 1 - k, False, False, f
         return k, -w, w, True, True, f

@@ -334,11 +334,7 @@ def _search_cells(pos, g, cutoff):
         cut *= 1.25
         shape, size = grid_shape(g.box, cut)
     fine = CellGrid(shape, size, g.box, g.periodic)
-    cells = shape[0] * shape[1] * shape[2]
-    cell_of = np.empty(n, np.int64)
-    cell_start = np.empty(cells, np.int64)
-    cell_count = np.empty(cells, np.int64)
-    order = np.empty(n, np.int64)
+    cell_of, cell_start, cell_count, order = allocate_cells(n, fine)
     build_cells(pos, fine, cell_of, cell_start, cell_count, order)
     return fine, cell_of, cell_start, cell_count, order
 
