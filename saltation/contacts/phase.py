@@ -114,6 +114,10 @@ default skin, which covers 20 u*). A grain still faster, or deflected beyond the
 counted in ``overruns``; after such a step the end positions are searched afresh for
 pairs in contact that the list does not hold (``missed_contacts``, reported in
 summary.json; the tests require zero).
+A widened skin is never narrowed again, so one fast grain sets it for the rest of the run.
+The full-size 3.94 % case after its spin-up ran with 1.40 d (36 neighbours per row); the
+reduced case keeps 0.96 d (20). In the reduced case, a skin of 1.4 d gives the same bits
+but costs 0.70–0.85 µs more per grain-step (alternated runs, 2026-12-06). Not changed.
 The engagement test reaches further than d: a grain ending the step below the bed top
 counts a margin of three reaches (its hard rebound), beyond what the list guarantees.
 Its first pass uses the rows, which hold every such pair when both grains are within
@@ -207,6 +211,18 @@ fewer counted. In the reduced sweep's cases the largest block after the cut hold
 2744 members at 3.94 % and 986 of 1323 at 2.07 %; run as one block, the gather takes
 0.54 instead of 1.03–1.15 µs per grain-step at 3.94 % (0.23 instead of 0.70–0.74 at
 2.07 %) and the sub-steps the same time.
+
+Known limit: a dense layer that percolates is one block at any size, so at full size it
+does not fit in cache. At 3.94 % on the paper's domain (99 335 grains, after a 1 s
+spin-up, one thread) the sub-steps cost 323 ns per grain-sub-step done against 96 in the
+reduced case, and the whole step 2.4–2.6× as much per grain-step. Those are alternated
+runs from the two spun-up states, 2026-12-06. ``bench_dense.py --cases
+cases/concentration_sweep.toml --concentrations 3.94`` gave 234 against 84 ns and 15.3
+against 7.4 µs per grain-step, an hour apart. The work per grain is the same at both
+sizes: 33.6 % of the grain-sub-steps are done and 64.5 % of those are retired.
+Placing the inactive members only when a force loop first reads them did not help: the
+same bits, but the sub-steps were 7–55 % slower at either size. Making such a layer fit
+the cache needs temporal blocking inside the layer, which is not done.
 
 Near pairs. A grain's row holds every list neighbour (cutoff d + skin; in the dense layer
 the skin is widened for the fast grains above it: ~21 entries per engaged grain at 3.94 %),
