@@ -218,7 +218,7 @@ spin-up, one thread) the sub-steps cost 323 ns per grain-sub-step done against 9
 reduced case, and the whole step 2.4–2.6× as much per grain-step. Those are alternated
 runs from the two spun-up states, 2026-12-06. ``bench_dense.py --cases
 cases/concentration_sweep.toml --concentrations 3.94`` gave 234 against 84 ns and 15.3
-against 7.4 µs per grain-step, an hour apart. The work per grain is the same at both
+against 7.4 µs per grain-step, in runs about two hours apart. The work per grain is the same at both
 sizes: 33.6 % of the grain-sub-steps are done and 64.5 % of those are retired.
 Placing the inactive members only when a force loop first reads them did not help: the
 same bits, but the sub-steps were 7–55 % slower at either size. Making such a layer fit
