@@ -94,7 +94,8 @@ size that block no longer fits in cache (contacts/phase.py, "Blocks", known limi
 on 2026-12-06 (99 335 grains, 53 min of spin-up, one thread): 15.3 µs per grain-step
 against 7.4 in the reduced case, with the sub-steps at 10.0 against 3.6. A fast grain
 had also widened the list's skin to 1.40 d, against 0.96 d in the reduced case (36
-against 20 neighbours per row). That full-domain run alone estimates 22.6 days. It takes
+against 20 neighbours per row; since then a widened skin goes back, contacts/phase.py).
+That full-domain run alone estimates 22.6 days. It takes
 every other concentration as costly per grain-step, so that figure is too high.
 
 Prints a table, the estimate, and this run against issue 19's targets (3.94 %, one thread:

@@ -406,3 +406,60 @@ def test_grains_never_penetrate_the_packed_bed(tmp_path, model):
     tol = 1e-9 if model == "off" else 0.01  # soft bed contacts overlap by ≲ 1 % d
     assert clear.min() > 1.0 - tol
     assert res.summary["collisions"]["bed"] > 0 and res.summary["jumps"]["recorded"] > 0
+
+
+def _skin_run(base_skin, steps=40, slow_from=10):
+    """A layer of grains on straight paths (no forces) in a 12 × 8 × 12 d box, one of them
+    fast (0.5 d per step) until ``slow_from``; the list's cells allow twice the 0.5 d skin,
+    as stepping.Stepper makes them. Returns the state, the skin after each step and the
+    phase's counters."""
+    model = K.make_contact_model(5e5, 0.65, 0.3)
+    dt, n_sub = 0.02, 128
+    xs = np.arange(6) * 2.0 + 0.5
+    pos = np.array([[x, y, z] for x in xs for z in xs for y in (3.0, 4.5)])
+    n = len(pos)
+    rng = np.random.default_rng(1)
+    vel = np.zeros((n, 3))
+    vel[:, 0::2] = rng.normal(0.0, 3.0, (n, 2))
+    vel[0] = (25.0, 0.0, 0.0)
+    st = make_state(pos, vel, np.zeros((n, 3)), 0.0, 4)
+    ws = make_workspace(n)
+    box = (12.0, 8.0, 12.0)
+    cl = K.make_contact_list(st.pos, box, (True, False, True), 1.0, 1.0)
+    cl = cl._replace(cutoff=1.5, skin=0.5)
+    ph = make_contact_phase(n)
+    bc = make_bed_context(n, False, make_packed_bed(3.0, 3.0), 0.65, 0.1, 0.5, model.kn, model.kt, 0,
+                          np.full(n, -2, np.int64))
+    cs = empty_substep_set()
+    skins = []
+    for s in range(steps):
+        if s == slow_from:
+            st.vel[0, 0] = 3.0
+        ws.x0[:, 0:3] = st.pos
+        ws.x0[:, 3:6] = st.vel
+        ws.x0[:, 6:9] = st.spin
+        st.pos[:] += dt * st.vel
+        cl, cs = soft_contact_phase(st, ws.x0, model, cl, ph, bc, s * dt, s, dt, n_sub, cs, 1, base_skin)
+        skins.append(cl.skin)
+    return st, np.array(skins), ph.counters.copy(), cl.collisions.sum()
+
+
+def test_a_widened_skin_narrows_back_with_the_same_bits():
+    """A fast grain widens the list's skin; once it has slowed down, the next rebuild
+    narrows the skin back to the case's (base_skin), which only changes how long the rows
+    are: the same bits as keeping the wide skin. Fails if the skin stays wide, or if
+    narrowing misses a contact (a different state, or a missed one counted)."""
+    from saltation.contacts.phase import MISSED, OVERRUNS
+
+    slow = 10
+    narrow, skins_n, cnt_n, coll_n = _skin_run(0.5)
+    wide, skins_w, cnt_w, coll_w = _skin_run(0.0)
+    # widened for the fast grain (to 1 d, as far as the cells allow)
+    assert skins_n[0] == skins_w[0] == 1.0
+    assert np.all(skins_w == 1.0)  # without a base skin it stays wide
+    assert np.all(skins_n[:slow] == 1.0) and skins_n[-1] == 0.5  # with one it narrows back once the grain slows
+    assert coll_n == coll_w > 0  # grains did collide
+    # an overrun only makes the phase search the end positions for contacts the list missed
+    assert cnt_n[MISSED] == cnt_w[MISSED] == 0 and cnt_n[OVERRUNS] >= 1
+    for a, b in ((narrow.pos, wide.pos), (narrow.vel, wide.vel), (narrow.spin, wide.spin)):
+        assert np.array_equal(a, b)

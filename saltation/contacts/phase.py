@@ -114,10 +114,12 @@ default skin, which covers 20 u*). A grain still faster, or deflected beyond the
 counted in ``overruns``; after such a step the end positions are searched afresh for
 pairs in contact that the list does not hold (``missed_contacts``, reported in
 summary.json; the tests require zero).
-A widened skin is never narrowed again, so one fast grain sets it for the rest of the run.
-The full-size 3.94 % case after its spin-up ran with 1.40 d (36 neighbours per row); the
-reduced case keeps 0.96 d (20). In the reduced case, a skin of 1.4 d gives the same bits
-but costs 0.70–0.85 µs more per grain-step (alternated runs, 2026-12-06). Not changed.
+At a rebuild a widened skin goes back to the case's skin (``base_skin``, stepping.Stepper)
+once 2.5× the fastest reach fits in it, the widening's margin. Before, one fast grain set the skin for
+the rest of the run: the full-size 3.94 % case ran with 1.40 d after its spin-up (36
+neighbours per row), while the reduced case keeps 0.96 d (20). In the reduced case a skin
+of 1.4 d gives the same bits but costs 0.70–0.85 µs more per grain-step (alternated runs,
+2026-12-06).
 The engagement test reaches further than d: a grain ending the step below the bed top
 counts a margin of three reaches (its hard rebound), beyond what the list guarantees.
 Its first pass uses the rows, which hold every such pair when both grains are within
@@ -2204,7 +2206,7 @@ def _scatter_set(cs, st, cl, bc, ph, skin_half):
 
 @njit(cache=True, no_cfunc_wrapper=True)
 def _with_skin(cl, skin):
-    """The ContactList with a larger skin (cells unchanged: they must be wide enough)."""
+    """The ContactList with another skin (cells unchanged: they must be wide enough)."""
     return ContactList(cl.grid, 1.0 + skin, skin, cl.cell_of, cl.cell_start,
                        cl.cell_count, cl.order, cl.ref_pos, cl.nbr, cl.nbr_count, cl.shear, cl.touch, cl.nbr2,
                        cl.nbr_count2, cl.shear2, cl.touch2, cl.n_touch, cl.collisions, cl.max_overlap, cl.builds)
@@ -2212,7 +2214,7 @@ def _with_skin(cl, skin):
 
 
 @njit(cache=True, no_cfunc_wrapper=True)
-def soft_contact_phase(state, x0w, model, cl, phase, bed, t0, step, dt, n_sub, cs, threads=1):
+def soft_contact_phase(state, x0w, model, cl, phase, bed, t0, step, dt, n_sub, cs, threads=1, base_skin=0.0):
     """Phase 2 of the module docstring for all grains: the free flight (x₀ in ``x0w``
     (N, 9) = w.x0, x₁ in ``state``, a GrainState; ``phase`` a ContactPhase, ``bed`` a
     BedContext) of step ``step`` (from t0) corrected by soft contacts
@@ -2221,7 +2223,8 @@ def soft_contact_phase(state, x0w, model, cl, phase, bed, t0, step, dt, n_sub, c
     SubstepSet the previous phase returned (or ``empty_substep_set()``), reused. ``threads``:
     Numba's thread count (``numba.get_num_threads()``, from Python: called in compiled code
     it makes the kernel uncachable); on more than one a large block's sub-steps run over
-    its members on all of them (_substep_part). Returns the ContactList to keep (it may
+    its members on all of them (_substep_part). ``base_skin`` > 0: a skin widened for a
+    fast grain narrows back towards it at a rebuild ("Neighbour list"). Returns the ContactList to keep (it may
     have been rebuilt) and the set to pass next time."""
     # one pointer each for the state tuples in every kernel below (grains/refs.py)
     st, ph, bc = GrainStateRef(*state), ContactPhaseRef(*phase), BedContextRef(*bed)
@@ -2238,12 +2241,18 @@ def soft_contact_phase(state, x0w, model, cl, phase, bed, t0, step, dt, n_sub, c
             for a in range(3):
                 ph.x0pos[i, a] = x0w[i, a]
         drift[:, :] = 0.0  # the list is now built at x₀
-        cl = rebuild(ph.x0pos, cl)
-        ph.counters[LIST_REBUILDS] += 1
         fastest = 0.0
         for i in range(n):
-            ph.ref_bound[i] = ph.reach[i]  # the list is now built at x₀
             fastest = max(fastest, ph.reach[i])
+        if base_skin > 0.0 and cl.skin > base_skin and 2.5 * fastest <= base_skin:
+            # the grains that widened the skin have slowed down: back to the case's skin,
+            # with the margin the widening gives
+            cl = _with_skin(cl, base_skin)
+            skin_half = 0.5 * cl.skin
+        cl = rebuild(ph.x0pos, cl)
+        ph.counters[LIST_REBUILDS] += 1
+        for i in range(n):
+            ph.ref_bound[i] = ph.reach[i]  # the list is now built at x₀
         if fastest > skin_half:
             # a grain faster than the skin allows: grow the skin as far as the cells allow
             widest = min(cl.grid.size[0], min(cl.grid.size[1], cl.grid.size[2])) - model.diameter

@@ -80,6 +80,7 @@ class SoftContacts(NamedTuple):
     """Soft contacts between grains: the sub-stepped contact phase (contacts/phase.py)."""
     n_sub: int  # sub-steps per hydrodynamic step
     threads: int = 1  # Numba threads: the contact blocks run in parallel on more than one
+    skin: float = 0.0  # d: the case's skin, to which a skin widened for a fast grain narrows back
 
 
 class HardContacts(NamedTuple):
@@ -154,7 +155,7 @@ def advance_split(f, coef, bed, virtual, packed, st, w, hc, t0, dt, n_steps, top
                 break
         if not bad and soft is not None:
             cl, cs = soft_contact_phase(st, w.x0, model, cl, ph, bc, t, step0 + s, dt, soft.n_sub, cs,
-                                        soft.threads)
+                                        soft.threads, soft.skin)
         if not bad and hard is not None:
             hard_contact_phase(st, cl, hard.restitution, hard.friction, scratch)
         c2 = wall_clock()
@@ -203,6 +204,8 @@ class Stepper:
         self.packed = PackedBedPass() if self.bed_model == BED_PACKED else None
         skin = getattr(cc, "skin", None)
         self.skin = float(skin) if skin is not None else default_skin(dt)
+        if self.soft is not None:
+            self.soft = self.soft._replace(skin=self.skin)
         height = min(max(self.top_d, LIST_HEIGHT[0]), LIST_HEIGHT[1])
         self.box = (float(lx), height, float(lz))
         n_list = n if self.contacts_mode != CONTACTS_OFF else 0
@@ -265,7 +268,7 @@ class Stepper:
 
         def jobs():
             elsewhere = [(soft_contact_phase, typed(st, ws.x0, self.model, self.cl, self.ph, self.bc, 0.0, 0, self.dt,
-                                                    soft.n_sub, empty_substep_set(), soft.threads))]
+                                                    soft.n_sub, empty_substep_set(), soft.threads, soft.skin))]
             here = [(_free_flight, typed(f, self.coef, st, ws, self.hist_coef, 0.0, self.dt)),
                     (_bed_pass, typed(st, ws, 0.0, self.dt, 0, self.bed, self.virtual, self.packed, self.pb,
                                       self.last_contact, self.top_d, self.ph.active))]
