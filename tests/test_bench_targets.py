@@ -52,3 +52,32 @@ def test_without_the_densest_case_only_the_estimate_is_judged(bench, capsys):
     out = _lines(bench, capsys, _rows(3.0e5, 1.0, 1.0)[:1], 4.0)
     assert out[1] == "C = 3.94 % not measured on one thread in this run"
     assert out[2].endswith("not comparable")  # its cost was extrapolated from 2.07 %
+
+
+def _measured(c, us, domain):
+    return {"concentration_pct": c, "domain": domain, "runs": {"1": {"us_per_grain_step": us}}}
+
+
+def test_the_estimate_takes_a_paper_domain_measurement_over_a_reduced_one(bench, capsys):
+    """Where the near-bed layer percolates the cost per grain-step depends on the domain
+    size: a run on the paper's domain (--with-json) replaces the reduced one at its
+    concentration, and the estimate says which concentrations still came from the reduced
+    domain."""
+    reduced = [_measured(2.07, 4.0, "reduced"), _measured(3.94, 7.0, "reduced")]
+    est = bench.sweep_estimate(reduced, bench.FULL)
+    merged = bench.sweep_estimate(reduced + [_measured(3.94, 15.0, "paper")], bench.FULL)
+    at = lambda e, c: [x for x in e["cases"] if round(x["concentration_pct"], 2) == c]  # noqa: E731
+    assert {x["us_per_grain_step"] for x in at(merged, 3.94)} == {15.0}
+    assert all(x["measured_on_paper_domain"] for x in at(merged, 3.94))
+    assert {x["us_per_grain_step"] for x in at(merged, 2.07)} == {4.0}
+    # only the 3.94 % cases cost more: by 15/7
+    assert merged["core_s"] - est["core_s"] == pytest.approx(sum(x["core_s"] for x in at(est, 3.94)) * (15 / 7 - 1))
+    # the order of the rows does not matter
+    assert bench.sweep_estimate([_measured(3.94, 15.0, "paper")] + reduced, bench.FULL) == merged
+    bench.print_estimate(merged)
+    out = capsys.readouterr().out
+    assert " 15.00F" in out and " 4.00 " in out
+    assert "2.07 % came from the reduced domain, so this estimate is low" in out
+    bench.print_estimate(bench.sweep_estimate([_measured(2.07, 9.0, "paper"), _measured(3.94, 15.0, "paper")],
+                                              bench.FULL))
+    assert "came from the reduced domain" not in capsys.readouterr().out
