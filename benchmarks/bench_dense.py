@@ -6,7 +6,8 @@ the contact part against LAMMPS; the full 24-case sweep's wall time estimated fr
         [--spinup 1.0] [--spinup-threads 1] [--steps 200] [--threads 1 2] [--no-lammps]
         [--lammps-concentrations 3.94] [--lammps-segment 10] [--lammps-skin 0.3]
         [--lmp lmp] [--keep DIR] [--cases cases/concentration_sweep_reduced.toml]
-        [--sweep cases/concentration_sweep.toml] [--json OUT]
+        [--sweep cases/concentration_sweep.toml] [--spinup-states DIR] [--json OUT]
+        [--with-json SAVED ...]
 
 Cases: ``cases/concentration_sweep_reduced.toml`` (the paper's physics on the paper's
 domain / 6 in x and z, so 1/36 of its grains at its concentration; soft contacts, virtual
@@ -19,6 +20,11 @@ runs in its own process:
    simulated seconds (default 1.0 s: the near-bed dense layer forms over ~1 s; not
    timed for the table, on ``--spinup-threads``, default 1; its cost per grain-step and
    the share of grains below 2 d are traced chunk by chunk, ``spinup_trace``);
+   With ``--spinup-states DIR`` the state after the spin-up is saved in DIR
+   (``spun_<sweep file>_C<C>_tau<τ*/τ*c>_<spin-up>s_<threads>thr.npz``) and a later run
+   with the same case, spin-up and spin-up threads loads it instead of spinning up (the
+   paper's domain takes ~1 h at 3.94 %); a file made for another case is refused, naming
+   what differs;
 2. keep the state (grains, fluid workspace, contact list and history, bed contacts,
    counters: the arrays a checkpoint keeps, engine/stepping.Stepper.state_arrays) and,
    for each thread count, restore it and time ``--steps`` hydrodynamic steps
@@ -144,6 +150,18 @@ def _sweep_case(path, concentration_pct, tau_ratio):
                      f"(concentrations {sorted({100 * c.values['run.concentration'] for c in sw.cases})})")
 
 
+def _code_version():
+    """The commit of this checkout (and "+changes" when it has uncommitted ones), or "unknown"."""
+    try:
+        head = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--short", "HEAD"], capture_output=True,
+                              text=True, check=True).stdout.strip()
+        dirty = subprocess.run(["git", "-C", str(ROOT), "status", "--porcelain", "--untracked-files=no"],
+                               capture_output=True, text=True).stdout.strip()
+        return head + ("+changes" if dirty else "")
+    except (OSError, subprocess.CalledProcessError):
+        return "unknown"
+
+
 def build(tables, overrides=None, out="/tmp/bench_dense_unused"):
     """(simulation, flow dataset, grain state, workspace) of a case, started, not stepped
     (its stepper advanced directly: no outputs)."""
@@ -173,6 +191,53 @@ def steps(sim, f, st, ws, step0, n):
 
 def _copy_tuple(t):
     return type(t)(*[a.copy() for a in t])
+
+
+def spun_state_path(folder, cases, c_pct, tau_ratio, spinup, threads):
+    return Path(folder) / f"spun_{Path(cases).stem}_C{c_pct:g}_tau{tau_ratio:g}_{spinup:g}s_{threads}thr.npz"
+
+
+def save_spun_state(path, meta, st, ws, arrays):
+    """The state after a spin-up: the grain state and workspace (by field), the stepper's
+    checkpoint arrays (Stepper.state_arrays) and ``meta`` (what it was made for), written
+    whole or not at all."""
+    import numpy as np
+
+    data = {f"st.{k}": v for k, v in zip(st._fields, st)}
+    data.update({f"ws.{k}": v for k, v in zip(ws._fields, ws)})
+    data.update({f"arr.{k}": v for k, v in arrays.items()})
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.name + ".part")
+    with open(tmp, "wb") as fh:
+        np.savez(fh, meta=np.array(json.dumps(meta, sort_keys=True)), **data)
+    os.replace(tmp, path)
+
+
+def load_spun_state(path, meta, st, ws, arrays):
+    """(st, ws, arrays) from a saved spin-up made for ``meta``, shaped as the fresh ones
+    given; SystemExit naming the file and what differs when it was made for another case."""
+    import numpy as np
+
+    try:
+        with np.load(path) as z:
+            saved = json.loads(str(z["meta"]))
+            keys = ["code"]  # which code made it: for the record only
+            diff = {k: (saved.get(k), v) for k, v in meta.items() if k not in keys and saved.get(k) != v}
+            if diff:
+                what = ", ".join(f"{k}: saved {a!r}, this run {b!r}" for k, (a, b) in diff.items())
+                raise SystemExit(f"{path}: a spin-up made for another case ({what}); delete it or use another "
+                                 "--spinup-states")
+            new_st = type(st)(*[z[f"st.{k}"] for k in st._fields])
+            new_ws = type(ws)(*[z[f"ws.{k}"] for k in ws._fields])
+            new_arrays = {k: z[f"arr.{k}"] for k in arrays}
+    except (OSError, KeyError, ValueError) as err:
+        raise SystemExit(f"{path}: not a readable saved spin-up ({type(err).__name__}: {err}); delete it to spin up "
+                         "again") from None
+    for name, a, b in zip(st._fields + ws._fields, new_st + new_ws, st + ws):
+        if a.shape != b.shape or a.dtype != b.dtype:
+            raise SystemExit(f"{path}: {name} is {a.dtype}{a.shape}, this run needs {b.dtype}{b.shape}; delete it")
+    return new_st, new_ws, new_arrays, saved
 
 
 def _touching(pos, lx, lz):
@@ -335,6 +400,20 @@ def one_concentration(args) -> dict:
     done = 0
     chunk = max(1, spin_steps // 10)
     trace = []  # per spin-up chunk: has the layer (and the cost per grain-step) settled?
+    spun, loaded = None, None
+    if args.spinup_states:
+        spun = spun_state_path(args.spinup_states, args.cases, args.one, args.tau_ratio, args.spinup,
+                               numba.get_num_threads())
+        meta = {"cases": Path(args.cases).name, "concentration_pct": args.one, "tau_ratio": args.tau_ratio,
+                "spinup_steps": spin_steps, "spinup_threads": numba.get_num_threads(), "n": n, "seed": c.run.seed,
+                "dt_particle": sim.dt, "n_sub": n_sub, "code": _code_version()}
+        if spun.exists():
+            st, ws, arrays, loaded = load_spun_state(spun, meta, st, ws, stp.state_arrays())
+            stp.start(st.pos)
+            stp.load_state_arrays(arrays, st.pos)
+            done = spin_steps
+            trace = loaded.get("trace", [])
+            say(f"spin-up loaded from {spun} (made by {loaded.get('code')}, {loaded.get('wall_s', 0):.0f} s wall)")
     while done < spin_steps:
         k, c0 = min(chunk, spin_steps - done), time.perf_counter()
         done += steps(sim, f, st, ws, done, k)
@@ -344,7 +423,10 @@ def one_concentration(args) -> dict:
                       "load_avg_1min": os.getloadavg()[0]})
         say(f"spin-up {done}/{spin_steps} steps, {time.perf_counter() - t0:.0f} s, {n * k / el:.3g} grain-steps/s, "
             f"{100 * trace[-1]['share_below_2d']:.0f} % below 2 d, load {trace[-1]['load_avg_1min']:.2f}")
-    spinup_wall = time.perf_counter() - t0
+    spinup_wall = time.perf_counter() - t0 if loaded is None else loaded.get("wall_s", float("nan"))
+    if spun is not None and loaded is None:
+        save_spun_state(spun, {**meta, "trace": trace, "wall_s": spinup_wall}, st, ws, stp.state_arrays())
+        say(f"spin-up saved in {spun}")
 
     # the state after spin-up, restored before every measurement
     keep_st, keep_ws = _copy_tuple(st), _copy_tuple(ws)
@@ -363,6 +445,7 @@ def one_concentration(args) -> dict:
         "dt_particle": sim.dt, "substep_particle": sim.dt / n_sub, "domain_d": [round(lx, 2), round(lz, 2)],
         "spinup_s_simulated": spin_steps * seconds_per_step, "spinup_steps": spin_steps,
         "spinup_wall_s": spinup_wall, "spinup_threads": min(args.spinup_threads, most), "spinup_trace": trace,
+        "spinup_loaded_from": str(spun) if loaded is not None else None,
         "compile_and_warmup_s": compile_s, "threading_layer": numba.threading_layer(),
         "steps": args.steps, "touching_pairs_start": pairs0, "bed_contacts_start": bed0,
         "mean_height_start_d": float(keep_st.pos[:, 1].mean()),
@@ -491,6 +574,8 @@ def run_one(c_pct, args) -> dict:
            "--threads", *map(str, args.threads),
            "--cases", str(args.cases), "--lmp", args.lmp, "--lammps-skin", repr(args.lammps_skin),
            "--lammps-segment", str(args.lammps_segment)]
+    if args.spinup_states:
+        cmd += ["--spinup-states", str(args.spinup_states)]
     if not args.no_lammps and any(abs(c_pct - x) < 1e-9 for x in args.lammps_concentrations):
         cmd.append("--lammps-on")
     if args.keep:
@@ -760,6 +845,8 @@ def main():
                     help="sweep file the measured cases come from (default the reduced sweep; the full sweep "
                          "cases/concentration_sweep.toml checks the domain-size assumption)")
     ap.add_argument("--sweep", default=str(FULL), help="the full sweep to estimate")
+    ap.add_argument("--spinup-states", default=None, metavar="DIR",
+                    help="save each spun-up state here, and load it instead of spinning up when it is there")
     ap.add_argument("--json", default=None)
     ap.add_argument("--print-json", default=None, metavar="FILE", help="print the table and estimate of a saved --json")
     ap.add_argument("--with-json", nargs="+", default=[], metavar="FILE",

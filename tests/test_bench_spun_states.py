@@ -1,0 +1,60 @@
+"""benchmarks/bench_dense.py --spinup-states: a saved spin-up comes back as it was saved,
+and a file made for another case, or not a saved spin-up at all, is refused by name."""
+import sys
+from pathlib import Path
+from typing import NamedTuple
+
+import numpy as np
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parent / "peers"))
+import benchmark_module  # noqa: E402
+
+
+class State(NamedTuple):
+    pos: np.ndarray
+    count: np.ndarray
+
+
+@pytest.fixture(scope="module")
+def bench():
+    return benchmark_module.load("bench_dense")
+
+
+META = {"cases": "concentration_sweep.toml", "concentration_pct": 3.94, "tau_ratio": 1.79, "spinup_steps": 1833,
+        "spinup_threads": 1, "n": 4, "seed": 1, "dt_particle": 0.02, "n_sub": 128, "code": "abc1234"}
+
+
+def _state(rng):
+    return State(rng.random((4, 3)), rng.integers(0, 9, 4))
+
+
+def test_a_saved_spin_up_loads_bit_for_bit(bench, tmp_path):
+    rng = np.random.default_rng(3)
+    st, ws, arrays = _state(rng), _state(rng), {"cl_nbr": rng.integers(0, 4, (4, 5)), "timers": rng.random(3)}
+    path = bench.spun_state_path(tmp_path, "cases/concentration_sweep.toml", 3.94, 1.79, 1.0, 1)
+    assert path.name == "spun_concentration_sweep_C3.94_tau1.79_1s_1thr.npz"
+    bench.save_spun_state(path, {**META, "wall_s": 12.0}, st, ws, arrays)
+    assert [p.name for p in tmp_path.iterdir()] == [path.name]  # no part file left
+    fresh = State(np.zeros((4, 3)), np.zeros(4, np.int64))
+    # another code version may load it (recorded only)
+    st2, ws2, arrays2, saved = bench.load_spun_state(path, {**META, "code": "other"}, fresh, fresh,
+                                                      {k: None for k in arrays})
+    assert saved["wall_s"] == 12.0 and saved["code"] == "abc1234"
+    for a, b in zip(st + ws, st2 + ws2):
+        assert np.array_equal(a, b) and a.dtype == b.dtype
+    assert all(np.array_equal(arrays[k], arrays2[k]) for k in arrays)
+
+
+def test_a_spin_up_for_another_case_or_a_broken_file_is_refused(bench, tmp_path):
+    rng = np.random.default_rng(4)
+    st = _state(rng)
+    path = tmp_path / "spun.npz"
+    bench.save_spun_state(path, META, st, st, {})
+    with pytest.raises(SystemExit, match=r"spun\.npz: a spin-up made for another case \(seed: saved 1, this run 2\)"):
+        bench.load_spun_state(path, {**META, "seed": 2}, st, st, {})
+    with pytest.raises(SystemExit, match="pos is float64.*needs float64\\(5, 3\\)"):
+        bench.load_spun_state(path, META, State(np.zeros((5, 3)), st.count), st, {})
+    path.write_bytes(b"not a state")
+    with pytest.raises(SystemExit, match=r"spun\.npz: not a readable saved spin-up.*delete it"):
+        bench.load_spun_state(path, META, st, st, {})
