@@ -241,22 +241,23 @@ def load_spun_state(path, meta, st, ws, arrays):
 
 
 def _touching(pos, lx, lz):
-    """(grain pairs closer than d, grains with y < 1/2) at pos (N, 3), x and z periodic."""
+    """(grain pairs closer than d, grains with y < 1/2) at pos (N, 3), x and z periodic.
+    Candidate pairs from a k-d tree (periodic in x and z; y padded to no wrap), each
+    counted when its minimum-image distance² is below 1."""
     import numpy as np
+    from scipy.spatial import cKDTree
 
     p = pos.copy()
     p[:, 0] %= lx
     p[:, 2] %= lz
-    pairs = 0
-    for i0 in range(0, len(p), 512):
-        a = p[i0:i0 + 512, None, :] - p[None, :, :]
-        a[..., 0] -= lx * np.round(a[..., 0] / lx)
-        a[..., 2] -= lz * np.round(a[..., 2] / lz)
-        r2 = (a * a).sum(-1)
-        idx = np.arange(i0, min(i0 + 512, len(p)))
-        r2[np.arange(len(idx)), idx] = np.inf
-        pairs += int((r2 < 1.0).sum())
-    return pairs // 2, int((pos[:, 1] < 0.5).sum())
+    p[:, 1] -= p[:, 1].min()
+    box = [lx, p[:, 1].max() + 2.0, lz]  # y wider than the layer plus the cutoff: no image in y
+    ij = cKDTree(p, boxsize=box).query_pairs(1.0 + 1e-9, output_type="ndarray")
+    a = p[ij[:, 0]] - p[ij[:, 1]]
+    a[:, 0] -= lx * np.round(a[:, 0] / lx)
+    a[:, 2] -= lz * np.round(a[:, 2] / lz)
+    pairs = int(((a * a).sum(-1) < 1.0).sum())
+    return pairs, int((pos[:, 1] < 0.5).sum())
 
 
 def _write_lammps_data(path, pos, vel, spin, lx, lz, ytop):

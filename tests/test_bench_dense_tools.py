@@ -1,5 +1,6 @@
-"""benchmarks/bench_dense.py --spinup-states: a saved spin-up comes back as it was saved,
-and a file made for another case, or not a saved spin-up at all, is refused by name."""
+"""benchmarks/bench_dense.py's tools: --spinup-states (a saved spin-up comes back as it was
+saved, and a file made for another case, or not a saved spin-up at all, is refused by
+name) and the count of touching pairs (the same as a direct count over all pairs)."""
 import sys
 from pathlib import Path
 from typing import NamedTuple
@@ -58,3 +59,22 @@ def test_a_spin_up_for_another_case_or_a_broken_file_is_refused(bench, tmp_path)
     path.write_bytes(b"not a state")
     with pytest.raises(SystemExit, match=r"spun\.npz: not a readable saved spin-up.*delete it"):
         bench.load_spun_state(path, META, st, st, {})
+
+
+def test_touching_pairs_are_those_of_a_direct_count(bench):
+    """Periodic in x and z (grains outside the box wrap), pairs just inside and just
+    outside contact, against every pair's minimum-image distance."""
+    rng = np.random.default_rng(5)
+    lx, lz, n = 12.0, 6.0, 900
+    pos = rng.random((n, 3)) * [2 * lx, 3.0, lz] + [-lx / 2, 0.2, 0.0]
+    pos[:40] = pos[40:80] + [0.0, 0.0, 1.0 - 1e-7]  # just touching
+    pos[80:120] = pos[120:160] + [0.0, 1.0 + 1e-7, 0.0]  # just apart
+    pos[160] = pos[161] + [lx - 0.5, 0.0, 0.0]  # touching across the periodic boundary
+    a = pos[:, None, :] - pos[None, :, :]
+    a[..., 0] -= lx * np.round(a[..., 0] / lx)
+    a[..., 2] -= lz * np.round(a[..., 2] / lz)
+    r2 = (a * a).sum(-1)
+    np.fill_diagonal(r2, np.inf)
+    direct = int((r2 < 1.0).sum()) // 2
+    assert direct > 40
+    assert bench._touching(pos, lx, lz) == (direct, int((pos[:, 1] < 0.5).sum()))
