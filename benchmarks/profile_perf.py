@@ -3,6 +3,7 @@ compiled code, named.
 
     python benchmarks/profile_perf.py [--concentration 3.94] [--tau-ratio 1.79]
         [--spinup 1.0] [--steps 200] [--frequency 4000] [--top 25] [--keep DIR]
+        [--cases cases/concentration_sweep_reduced.toml] [--spinup-states DIR]
 
 Builds the reduced sweep case at that concentration (cases/concentration_sweep_reduced.toml,
 as benchmarks/bench_dense.py), spins it up (default 1 s: the dense near-bed layer forms
@@ -15,6 +16,9 @@ sub-step kernels of contacts/phase.py are mostly inlined into ``_run_block``, ``
 and ``_wake_up``); parallel loops run in gufuncs that are named only when they have a
 symbol of their own (``unnamed``: the rest). The table gives each function's share of the
 samples taken in compiled code, and the share of all samples that were compiled code.
+``--cases cases/concentration_sweep.toml`` profiles the paper's domain instead, and
+``--spinup-states DIR`` loads a spin-up that ``bench_dense.py --spinup-states DIR`` saved
+(the paper's domain takes ~1 h at 3.94 %) or saves its own there.
 
 It compiles everything afresh in a temporary NUMBA_CACHE_DIR (a library loaded from the
 cache has no object code to read symbols from), which takes a minute or two before the
@@ -139,6 +143,9 @@ def main():
     ap.add_argument("--frequency", type=int, default=4000, help="perf samples per second")
     ap.add_argument("--top", type=int, default=25)
     ap.add_argument("--keep", default=None, help="keep perf.data, the map and the object code here")
+    ap.add_argument("--cases", default=None, help="sweep file of the case (default the reduced sweep)")
+    ap.add_argument("--spinup-states", default=None, metavar="DIR",
+                    help="load the spun-up state from here (bench_dense.py --spinup-states), or save it here")
     args = ap.parse_args()
     for tool in ("perf", "nm"):
         if shutil.which(tool) is None:
@@ -164,14 +171,28 @@ def main():
     import saltation
 
     sys.path.insert(0, str(HERE))
-    from bench_dense import REDUCED, _sweep_case, build, steps  # noqa: E402 - the benchmarks' folder
+    import bench_dense as bd  # noqa: E402 - the benchmarks' folder
 
-    sim, ds, st, ws = build(*_sweep_case(REDUCED, args.concentration, args.tau_ratio), out=str(work / "unused_run"))
+    cases = args.cases or bd.REDUCED
+    sim, ds, st, ws = bd.build(*bd._sweep_case(cases, args.concentration, args.tau_ratio), out=str(work / "unused_run"))
+    steps = bd.steps
     numba.set_num_threads(1)
 
     t0 = time.perf_counter()
     spin = int(round(args.spinup / sim.case.dt))  # seconds per step
-    steps(sim, ds.arrays, st, ws, 0, spin)
+    spun = None
+    if args.spinup_states:
+        spun = bd.spun_state_path(args.spinup_states, cases, args.concentration, args.tau_ratio, args.spinup, 1)
+        meta = bd.spun_meta(cases, args.concentration, args.tau_ratio, sim, spin, 1)
+    if spun is not None and spun.exists():
+        steps(sim, ds.arrays, st, ws, 0, 1)  # compile (the state is then replaced)
+        st, ws, _ = bd.load_spun_into(spun, meta, sim, st, ws)
+        print(f"spin-up loaded from {spun}", file=sys.stderr)
+    else:
+        steps(sim, ds.arrays, st, ws, 0, spin)
+        if spun is not None:
+            bd.save_spun_state(spun, {**meta, "trace": [], "wall_s": time.perf_counter() - t0}, st, ws,
+                               sim.stepper.state_arrays())
     print(f"N = {sim.n}, C = {args.concentration} %: compile and spin-up ({spin} steps) "
           f"{time.perf_counter() - t0:.0f} s", file=sys.stderr)
     data = work / "perf.data"

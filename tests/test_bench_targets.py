@@ -54,6 +54,15 @@ def test_without_the_densest_case_only_the_estimate_is_judged(bench, capsys):
     assert out[2].endswith("not comparable")  # its cost was extrapolated from 2.07 %
 
 
+def test_a_run_on_the_papers_domain_is_not_the_targets_case(bench, capsys):
+    """The per-step targets are for the reduced case: a run on the paper's domain is not
+    judged against them (its estimate still is)."""
+    rows = [{**r, "domain": "paper"} for r in _rows(3.0e5, 2.0, 1.0)]
+    out = _lines(bench, capsys, rows, 4.0)
+    assert "paper's domain" in out[1]
+    assert [x.rsplit(": ", 1)[1] for x in out[2:]] == ["not comparable", "not comparable", "met"]
+
+
 def _measured(c, us, domain):
     return {"concentration_pct": c, "domain": domain, "runs": {"1": {"us_per_grain_step": us}}}
 
