@@ -93,19 +93,17 @@ runs of the same deterministic state differed by up to ~35 % in grain-steps/s), 
 stepping is counted (not a run's outputs: jumps, displacement variances, checkpoints),
 and concentrations not measured are interpolated linearly in C (marked).
 
-The domain-size assumption fails for the densest case, so the estimate from the reduced
-cases is too low. At 3.94 % the near-bed layer percolates into one block, and at full
-size that block no longer fits in cache (contacts/phase.py, "Blocks", known limit).
-``--cases cases/concentration_sweep.toml --concentrations 3.94 --no-lammps`` measured it
-on 2026-12-06 (99 335 grains, 53 min of spin-up, one thread): 15.3 µs per grain-step
-against 7.4 in the reduced case, with the sub-steps at 10.0 against 3.6. A fast grain
-had also widened the list's skin to 1.40 d, against 0.96 d in the reduced case (36
-against 20 neighbours per row; since then a widened skin goes back, contacts/phase.py).
-That full-domain run alone estimates 22.6 days. It takes
-every other concentration as costly per grain-step, so that figure is too high.
-``--with-json`` joins saved runs to the estimate, a measurement on the paper's domain
-replacing a reduced one at its concentration (marked F), and the estimate names the
-concentrations from 2.07 % on that still came from the reduced domain.
+The domain-size assumption fails where the near-bed layer percolates (2.07 % and 3.94 %):
+it is one block there, and at full size that block no longer fits in cache
+(contacts/phase.py, "Blocks", known limit). ``--cases cases/concentration_sweep.toml
+--concentrations 2.07 3.94 --no-lammps --steps 100`` measured it on 2026-12-06 from
+spin-ups saved with ``--spinup-states`` (52 189 and 99 335 grains; 15 and 53 min of
+spin-up): 11.5 and 17.8 µs per grain-step on one thread, against 4.7 and 7.5 in the
+reduced cases ten minutes later. ``--with-json`` joins saved runs to the estimate, a
+measurement on the paper's domain replacing a reduced one at its concentration (marked
+F), and the estimate names the concentrations from 2.07 % on that still came from the
+reduced domain. The reduced sweep with those two full-domain runs joined: 18.2 days
+(the reduced sweep alone: 8.3).
 
 Prints a table, the estimate, and this run against issue 19's targets (3.94 %, one thread:
 grain-steps/s, the contact phase over the free flight of the same run; the full-sweep

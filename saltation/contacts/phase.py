@@ -119,7 +119,9 @@ once 2.5× the fastest reach fits in it, the widening's margin. Before, one fast
 the rest of the run: the full-size 3.94 % case ran with 1.40 d after its spin-up (36
 neighbours per row), while the reduced case keeps 0.96 d (20). In the reduced case a skin
 of 1.4 d gives the same bits but costs 0.70–0.85 µs more per grain-step (alternated runs,
-2026-12-06).
+2026-12-06). From that full-size state (100 steps, one thread, the code before and after
+alternated, two rounds) the contact phase over the free flight of the same run went
+12.5 and 11.2 → 10.6 and 9.3, with the same end state.
 The engagement test reaches further than d: a grain ending the step below the bed top
 counts a margin of three reaches (its hard rebound), beyond what the list guarantees.
 Its first pass uses the rows, which hold every such pair when both grains are within
@@ -217,14 +219,21 @@ fewer counted. In the reduced sweep's cases the largest block after the cut hold
 Known limit: a dense layer that percolates is one block at any size, so at full size it
 does not fit in cache. At 3.94 % on the paper's domain (99 335 grains, after a 1 s
 spin-up, one thread) the sub-steps cost 323 ns per grain-sub-step done against 96 in the
-reduced case, and the whole step 2.4–2.6× as much per grain-step. Those are alternated
-runs from the two spun-up states, 2026-12-06. ``bench_dense.py --cases
-cases/concentration_sweep.toml --concentrations 3.94`` gave 234 against 84 ns and 15.3
-against 7.4 µs per grain-step, in runs about two hours apart. The work per grain is the same at both
-sizes: 33.6 % of the grain-sub-steps are done and 64.5 % of those are retired.
-Placing the inactive members only when a force loop first reads them did not help: the
-same bits, but the sub-steps were 7–55 % slower at either size. Making such a layer fit
-the cache needs temporal blocking inside the layer, which is not done.
+reduced case, and the whole step 2.4–2.6× as much per grain-step (alternated runs from
+the two spun-up states, with the old 1.40 d skin). With the skin narrowed back,
+``bench_dense.py --cases cases/concentration_sweep.toml --concentrations 2.07 3.94``
+(2026-12-06, states of --spinup-states) gave 17.8 µs per grain-step at 3.94 % and 11.5
+at 2.07 %, against 7.5 and 4.7 in the reduced cases measured ten minutes later. The work
+per grain is the same at both sizes (3.94 %: 33.6 % of the grain-sub-steps are done,
+64.5 % of those retired). Placing the inactive members only when a force loop first
+reads them did not help: the same bits, but the sub-steps were 7–55 % slower at either
+size. Making such a layer fit the cache needs temporal blocking inside it, which is not
+done: at 3.94 % the layer holds ~190 members per d of x (48 000 over 255 d), so a piece
+that fits the 2 MB L2 is only ~10 d long. Slabs in x at least one cutoff wide could be
+sub-stepped in a skewed order (slab k to sub-step s once slabs k ± 1 reached s, each
+member's place kept for two sub-steps), so that each slab's data serves many sub-steps
+per load; the joins and wake-ups across slabs, retirements that read partners at another
+sub-step, and the periodic x make that more than a change of loop order.
 
 Near pairs. A grain's row holds every list neighbour (cutoff d + skin; in the dense layer
 the skin is widened for the fast grains above it: ~21 entries per engaged grain at 3.94 %),
