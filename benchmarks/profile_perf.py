@@ -180,21 +180,21 @@ def main():
 
     t0 = time.perf_counter()
     spin = int(round(args.spinup / sim.case.dt))  # seconds per step
-    spun = None
+    spun, how = None, f"spin-up ({spin} steps)"
     if args.spinup_states:
         spun = bd.spun_state_path(args.spinup_states, cases, args.concentration, args.tau_ratio, args.spinup, 1)
         meta = bd.spun_meta(cases, args.concentration, args.tau_ratio, sim, spin, 1)
     if spun is not None and spun.exists():
         steps(sim, ds.arrays, st, ws, 0, 1)  # compile (the state is then replaced)
         st, ws, _ = bd.load_spun_into(spun, meta, sim, st, ws)
-        print(f"spin-up loaded from {spun}", file=sys.stderr)
+        how = f"spin-up loaded from {spun}"
     else:
         steps(sim, ds.arrays, st, ws, 0, spin)
         if spun is not None:
             bd.save_spun_state(spun, {**meta, "trace": [], "wall_s": time.perf_counter() - t0}, st, ws,
                                sim.stepper.state_arrays())
-    print(f"N = {sim.n}, C = {args.concentration} %: compile and spin-up ({spin} steps) "
-          f"{time.perf_counter() - t0:.0f} s", file=sys.stderr)
+    print(f"N = {sim.n}, C = {args.concentration} %: compile and {how}: {time.perf_counter() - t0:.0f} s",
+          file=sys.stderr)
     data = work / "perf.data"
     rec = subprocess.Popen(["perf", "record", "-F", str(args.frequency), "-o", str(data), "-p", str(os.getpid())],
                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
