@@ -233,7 +233,12 @@ that fits the 2 MB L2 is only ~10 d long. Slabs in x at least one cutoff wide co
 sub-stepped in a skewed order (slab k to sub-step s once slabs k ± 1 reached s, each
 member's place kept for two sub-steps), so that each slab's data serves many sub-steps
 per load; the joins and wake-ups across slabs, retirements that read partners at another
-sub-step, and the periodic x make that more than a change of loop order.
+sub-step, and the periodic x make that more than a change of loop order. Profiled
+(benchmarks/profile_perf.py, 3.94 %, one thread), the growth is in the force loop:
+_forces 26 % of the compiled samples in the reduced case, 48 % on the paper's domain,
+against 19 % for _kick_drift in both. The rows it streams each sub-step push the
+partners' data out of cache. Rows with their near entries first (a stable reorder in
+_near_pairs, so the sums keep their order) would halve what it streams; not tried.
 
 Near pairs. A grain's row holds every list neighbour (cutoff d + skin; in the dense layer
 the skin is widened for the fast grains above it: ~21 entries per engaged grain at 3.94 %),
