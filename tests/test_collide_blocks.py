@@ -25,6 +25,13 @@ def _same(a, b):
         np.testing.assert_array_equal(getattr(sa, name), getattr(sb, name), err_msg=name)
     np.testing.assert_array_equal(ca.collisions, cb.collisions)
     np.testing.assert_array_equal(ca.max_overlap, cb.max_overlap)
+    # the contact history, each pair's in its list entry (_near_pairs reorders the rows)
+    np.testing.assert_array_equal(ca.nbr_count, cb.nbr_count)
+    for i in range(len(ca.nbr_count)):
+        m = ca.nbr_count[i]
+        np.testing.assert_array_equal(ca.nbr[i, :m], cb.nbr[i, :m])
+        np.testing.assert_array_equal(ca.touch[i, :m], cb.touch[i, :m], err_msg=f"touch of {i}")
+        np.testing.assert_array_equal(ca.shear[i, :m], cb.shear[i, :m], err_msg=f"shear of {i}")
 
 
 def _layer(lz, seed):
@@ -202,3 +209,27 @@ def test_the_near_pair_filter_gives_the_unfiltered_result_and_redoes_when_a_far_
     _same(tight, plain)
     for run in (default, tight):
         np.testing.assert_array_equal(run[2].counters[:3], plain[2].counters[:3])
+
+
+def test_near_entries_go_first_in_row_order_and_remember_their_list_entries():
+    # one row at places 5..27 of the set's row arrays, 9 of its 23 entries near
+    from saltation.contacts.phase import _near_first
+    rng = np.random.default_rng(4)
+    r0, r1, size = 5, 28, 40
+    nbr = rng.integers(0, 1000, size)
+    image = rng.normal(size=(size, 3))
+    touch = rng.integers(0, 2, size).astype(np.uint8)
+    shear = rng.normal(size=(size, 3))
+    near = np.ones(size, np.uint8)
+    near[r0:r1] = 0
+    near[r0 + rng.choice(r1 - r0, 9, replace=False)] = 1
+    nx = np.arange(size)
+    before = [a.copy() for a in (nbr, image, touch, shear, near)]
+    order = np.concatenate([np.flatnonzero(near[r0:r1]), np.flatnonzero(near[r0:r1] == 0)]) + r0
+    _near_first(nbr, image, touch, shear, near, nx, r0, r1, 9)
+    np.testing.assert_array_equal(nx[r0:r1], order)  # where each place came from
+    for got, old in zip((nbr, image, touch, shear), before[:4], strict=True):
+        np.testing.assert_array_equal(got[r0:r1], old[order])
+        np.testing.assert_array_equal(got[:r0], old[:r0])  # other rows untouched
+        np.testing.assert_array_equal(got[r1:], old[r1:])
+    np.testing.assert_array_equal(near[r0:r1], np.arange(r1 - r0) < 9)

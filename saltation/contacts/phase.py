@@ -237,16 +237,18 @@ sub-step, and the periodic x make that more than a change of loop order. Profile
 (benchmarks/profile_perf.py, 3.94 %, one thread), the growth is in the force loop:
 _forces 26 % of the compiled samples in the reduced case, 48 % on the paper's domain,
 against 19 % for _kick_drift in both. The rows it streams each sub-step push the
-partners' data out of cache. Rows with their near entries first (a stable reorder in
-_near_pairs, so the sums keep their order) would halve what it streams; not tried.
+partners' data out of cache. So _near_pairs puts each row's near entries first (see
+"Near pairs"): measured below.
 
 Near pairs. A grain's row holds every list neighbour (cutoff d + skin; in the dense layer
 the skin is widened for the fast grains above it: ~21 entries per engaged grain at 3.94 %),
 but only a few can come near it within the step: ~9 whose free-flight paths come within
 d + 0.4 d (_path_gap), 0.1 actually touching. So the sub-steps look only at the pairs
 whose paths come within d + 2σ, σ = NEAR_SLACK = 0.1 d (``near``, set in the gather by
-``_near_pairs``, which lists a row's near entries in ``nx``; a pair in contact from the
-last step is always near). Afterwards
+``_near_pairs``, which moves a row's near entries to its front, in their order, so the
+sums over them keep theirs and the force loop reads its first ``nn`` entries only, not
+every entry's place looked up; ``nx`` keeps where each came from for the scatter; a pair
+in contact from the last step is always near). Afterwards
 ``_conflicts`` checks every far pair of an active grain as it checks pairs across blocks:
 path gap − |δx|ₘₐₓ,ᵢ − |δx|ₘₐₓ,ⱼ > d certifies that the pair never touched, so looking at
 it would have added nothing (the same bits); otherwise the phase is redone without the
@@ -534,8 +536,8 @@ class SubstepSet(NamedTuple):
     block: np.ndarray  # (C,) int64 the block the member is sub-stepped in ("Blocks")
     jump_n0: np.ndarray  # (C,) int64 the grain's jump_buf_n and jump_count when its row was
     jump_c0: np.ndarray  # (C,) int64 copied in (restored if the phase is redone unblocked)
-    nn: np.ndarray  # (C,) int64 near entries of the row, listed in nx[rs : rs + nn] ("Near pairs")
-    nx: np.ndarray  # (R,) int64 flat indices of a row's near entries, in row order
+    nn: np.ndarray  # (C,) int64 near entries of the row: its first nn ("Near pairs")
+    nx: np.ndarray  # (R,) int64 where each row entry was set (_set_row): its list entry is nx − rs
     at: np.ndarray  # (C, 3) every member's position at the sub-step being evaluated (_at)
     image: np.ndarray  # (R, 3) periodic-image shift of row entry k for the step (_set_row)
     retry: np.ndarray  # (C,) step fraction from which an active member may try to retire; a retired one is forced again
@@ -725,7 +727,7 @@ def _grain_force(a, cs, model, s, dt, h, update, blk):
     damp_n = meff * model.gamma_n
     damp_t = meff * model.gamma_t
     at_radius = model.lever == LEVER_RADIUS
-    cur, active, nbr, shear, touch, block, nx, at = cs.cur, cs.active, cs.nbr, cs.shear, cs.touch, cs.block, cs.nx, cs.at
+    cur, active, nbr, shear, touch, block, at = cs.cur, cs.active, cs.nbr, cs.shear, cs.touch, cs.block, cs.at
     image = cs.image
     fx = 0.0
     fy = 0.0
@@ -738,10 +740,9 @@ def _grain_force(a, cs, model, s, dt, h, update, blk):
     omax = cs.max_overlap[a]
     xi, yi, zi = cur[a, 0], cur[a, 1], cur[a, 2]
     r0 = cs.rs[a]
-    # the near entries only: a far one is out of touch all step, and never touching
-    # (_near_pairs keeps those near), so looking at it would add nothing
-    for q in range(r0, r0 + cs.nn[a]):
-        k = nx[q]
+    # the near entries only (the row's first nn): a far one is out of touch all step, and
+    # never touching (_near_pairs keeps those near), so looking at it would add nothing
+    for k in range(r0, r0 + cs.nn[a]):
         b = nbr[k]
         rsq = d2
         delx = dely = delz = 0.0
@@ -1339,10 +1340,9 @@ def _quiet_until(cs, a, s, dt, h, d, blk):
     least = QUIET_MIN * h / span
     if first <= least:
         return 0.0
-    active, nbr, nx, block, image = cs.active, cs.nbr, cs.nx, cs.block, cs.image
+    active, nbr, block, image = cs.active, cs.nbr, cs.block, cs.image
     r0 = cs.rs[a]
-    for q in range(r0, r0 + cs.nn[a]):
-        k = nx[q]
+    for k in range(r0, r0 + cs.nn[a]):
         b = nbr[k]
         if block[b] != blk or active[b] == ACTIVE:
             continue  # out of touch all step (_conflicts), or looks at a
@@ -1878,22 +1878,68 @@ def _fill(cs, members, x0w, st, cl, bc, ph, cand, key):
 def _near_pairs(cs, cand, box, per, dt, limit):
     """near[k] = 0 for the row entries of the candidates ``cand`` whose free-flight paths
     stay further apart than ``limit`` over the step (_path_gap) and that are not in
-    contact from the last step ("Near pairs"); the others listed in nx (nn of them).
-    Each candidate writes only its own row: the candidates run on all threads."""
+    contact from the last step ("Near pairs"); the others (nn of them) moved to the row's
+    front, in row order, the far ones after them (_near_first). Each candidate writes
+    only its own row: the candidates run on all threads."""
     # arrays unpacked before the parallel loop: Numba 0.68 drops writes made in a prange
     # body through a named tuple's arrays (flight/spheres.py)
     path, rs, rc, nbr, touch, near, nx, nn = cs.path, cs.rs, cs.rc, cs.nbr, cs.touch, cs.near, cs.nx, cs.nn
+    image, shear = cs.image, cs.shear
     for t in prange(cand.shape[0]):
         a = cand[t]
         r0 = rs[a]
+        r1 = r0 + rc[a]
         m = 0
-        for k in range(r0, r0 + rc[a]):
+        for k in range(r0, r1):
             if touch[k] == 0 and _member_gap(path, a, nbr[k], box, per, dt) > limit:
                 near[k] = 0
             else:
-                nx[r0 + m] = k
                 m += 1
         nn[a] = m
+        if m < r1 - r0:
+            _near_first(nbr, image, touch, shear, near, nx, r0, r1, m)
+
+
+@njit(cache=True, no_cfunc_wrapper=True, inline="always", _nrt=False)
+def _near_first(nbr, image, touch, shear, near, nx, r0, r1, m):
+    """Row r0..r1 (m of its entries near) with its near entries first and its far ones
+    after them, each in row order, so every sum over the near entries keeps its order (the
+    same bits). In place: nx[p] is set to the entry that goes to place p and the row
+    follows its cycles (``near`` marking the places done), then near[p] = 1 for its first
+    m places. nx keeps where each place came from (as _set_row wrote the row: entry k is
+    list entry k − r0): _scatter_set writes the contact history back there."""
+    p = r0
+    for k in range(r0, r1):
+        if near[k] != 0:
+            nx[p] = k
+            p += 1
+    for k in range(r0, r1):
+        if near[k] == 0:
+            nx[p] = k
+            p += 1
+    for p in range(r0, r1):
+        near[p] = 0
+    for p in range(r0, r1):
+        if near[p] != 0 or nx[p] == p:
+            near[p] = 1
+            continue
+        b, i0, i1, i2 = nbr[p], image[p, 0], image[p, 1], image[p, 2]
+        t, s0, s1, s2 = touch[p], shear[p, 0], shear[p, 1], shear[p, 2]
+        q = p
+        while nx[q] != p:
+            k = nx[q]
+            nbr[q] = nbr[k]
+            touch[q] = touch[k]
+            for c in range(3):
+                image[q, c] = image[k, c]
+                shear[q, c] = shear[k, c]
+            near[q] = 1
+            q = k
+        nbr[q], image[q, 0], image[q, 1], image[q, 2] = b, i0, i1, i2
+        touch[q], shear[q, 0], shear[q, 1], shear[q, 2] = t, s0, s1, s2
+        near[q] = 1
+    for p in range(r0, r1):
+        near[p] = 1 if p - r0 < m else 0
 
 
 @njit(cache=True, no_cfunc_wrapper=True)
@@ -2179,10 +2225,11 @@ def _scatter_set(cs, st, cl, bc, ph, skin_half):
         ph.act[na] = g
         na += 1
         r0 = cs.rs[a]
-        for k in range(cs.rc[a]):
-            cl.touch[g, k] = cs.touch[r0 + k]
+        for k in range(r0, r0 + cs.rc[a]):
+            e = cs.nx[k] - r0  # the entry's place in the list's row (_near_pairs)
+            cl.touch[g, e] = cs.touch[k]
             for c in range(3):
-                cl.shear[g, k, c] = cs.shear[r0 + k, c]
+                cl.shear[g, e, c] = cs.shear[k, c]
         cl.collisions[g] = cs.collisions[a]
         cl.max_overlap[g] = cs.max_overlap[a]
         cl.n_touch[g] = cs.n_touch[a]
