@@ -8,7 +8,7 @@ import numpy as np
 from test_collide_layout import run_contact_phase
 
 from saltation.contacts import pairs as K
-from saltation.contacts.phase import BLOCKS, MERGED_PASSES, PARALLEL_BLOCKS, REDONE_FAR, WAKES
+from saltation.contacts.phase import BLOCKS, MERGED_PASSES, PARALLEL_BLOCKS, REDONE_FAR, WAKES, WIDENED
 
 TWO_THREADS = min(2, numba.config.NUMBA_NUM_THREADS)
 
@@ -209,6 +209,20 @@ def test_the_near_pair_filter_gives_the_unfiltered_result_and_redoes_when_a_far_
     _same(tight, plain)
     for run in (default, tight):
         np.testing.assert_array_equal(run[2].counters[:3], plain[2].counters[:3])
+
+
+def test_a_member_that_deviates_by_the_slack_widens_the_rows_instead_of_redoing_the_phase():
+    # σ = 0.02 d: many grains deviate further within a step. Each is widened (it and its
+    # partners look at every pair from then on), so no phase is redone for a far pair,
+    # and the result is the unfiltered one, bit for bit (contacts/phase.py, "Widened rows")
+    box, pos, vel = _layer(12.0, 5)
+    plain = _run(pos, vel, 1, box, 0.6, 5, 0.02, near_slack=np.inf)
+    narrow = _run(pos, vel, 1, box, 0.6, 5, 0.02, near_slack=0.02)
+    assert plain[2].counters[WIDENED] == 0
+    assert narrow[2].counters[WIDENED] >= 5
+    assert narrow[2].counters[REDONE_FAR] == 0
+    _same(narrow, plain)
+    np.testing.assert_array_equal(narrow[2].counters[:3], plain[2].counters[:3])
 
 
 def test_near_entries_go_first_in_row_order_and_remember_their_list_entries():

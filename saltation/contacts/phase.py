@@ -257,6 +257,21 @@ spin-up, 100 steps, one thread): the contact phase 10.45 s without the filter, 8
 σ = 0.1 d and no phase redone; σ = 0.15: 10.1 s; 0.075: 9.1 s, 3 redone; 0.05: 15.3 s,
 70 redone.
 
+Widened rows. A redo reruns every block, and the chance that some far pair of a phase
+fails the certificate grows with the grains in it: on the paper's domain at 3.94 % (99 335
+grains) 34 of 100 phases were redone, against none in the reduced case. But a far pair
+fails it only if its two deviations add up to 2σ or more, so one of them reached σ. So a
+member whose |δx|² reaches σ² (less room for rounding: _wide_dev2) in _kick_drift is
+*widened* (_widen): its row and its partners' rows in its block are put back in list
+order with every entry near, it is forced from that sub-step on (a retired one too: its
+quiet time did not look at its far partners), and each of those pairs is looked at by
+both grains from then on. Any far pair left has both members below σ, which _conflicts
+certifies without computing a gap, and no phase is redone for a far pair. The same bits:
+a pair looked at while apart adds nothing, and a widened row sums its terms in list order,
+as the unfiltered phase does. ``counters[WIDENED]`` counts the widened members. In a
+block cut into lanes (_substep_part) nothing is widened: rows are shared between lanes,
+so there a far pair that came near still redoes the phase.
+
 Retired members. At 3.94 % more than half of the active grain-sub-steps come after the
 grain's last contact in the step (it left the bed layer, or a neighbour), or before its
 next one: each still looks at its row and the bed at every sub-step and finds nothing. So
@@ -404,7 +419,8 @@ REDONE_MERGED = 7  # phases redone with conflicting groups merged
 PARALLEL_BLOCKS = 8  # blocks whose sub-steps ran on several threads (soft_contact_phase)
 REDONE_FAR = 9  # phases redone without the near-pair filter (a far pair came near)
 RETIRED_SUBSTEPS = 10  # grain-sub-steps of retired members (SUBSTEPPED counts them too; "Retired members")
-N_COUNTERS = 11
+WIDENED = 11  # members whose far pairs were looked at once their deviation reached the slack ("Near pairs")
+N_COUNTERS = 12
 
 # parts of soft_contact_phase whose wall time ContactPhase.clocks adds up (when profiling)
 CLOCK_LIST = 0  # reach of every path, neighbour-list rebuild
@@ -544,6 +560,7 @@ class SubstepSet(NamedTuple):
     flagged: np.ndarray  # (C,) int64 scratch: members that touched one not active, in _forces' order
     go: np.ndarray  # (C,) int64 scratch: the active members of the sub-step, in member order (_kick_drift)
     retired: np.ndarray  # (1,) int64 grain-sub-steps of the block's members while retired
+    widened: np.ndarray  # (1,) int64 members whose deviation reached the near filter's slack (_widen)
 
 
 # The set travels between kernels as a StructRef (grains/refs.py), made and grown only in
@@ -569,6 +586,7 @@ def _make_set(c, r):
         np.empty((c, 3)), np.empty(c, np.int64), np.empty(c), np.empty(c), np.empty(c), np.empty(c, np.int64),
         np.empty(c, np.int64), np.empty(c, np.int64), np.empty(c, np.int64), np.empty(r, np.int64),
         np.empty((c, 3)), np.empty((r, 3)), np.empty(c), np.empty(c, np.int64), np.empty(c, np.int64), np.zeros(1, np.int64),
+        np.zeros(1, np.int64),
     )
 
 
@@ -615,6 +633,7 @@ def _grow(cs, c, r):
         _resized(cs.jump_x0, c), _resized(cs.jump_ymax, c), _resized(cs.block, c), _resized(cs.jump_n0, c),
         _resized(cs.jump_c0, c), _resized(cs.nn, c), _resized(cs.nx, r), _resized(cs.at, c),
         _resized(cs.image, r), _resized(cs.retry, c), _resized(cs.flagged, c), _resized(cs.go, c), cs.retired,
+        cs.widened,
     )
 
 
@@ -1367,7 +1386,7 @@ def _half_kick(dev, ft, a, h, inv_m, inv_i):
 
 
 @njit(cache=True, no_cfunc_wrapper=True, error_model="numpy", _nrt=False)
-def _kick_drift(cs, model, s_next, dt, h, lo, hi, app, t0, t1, kick_first, listing, backoff):
+def _kick_drift(cs, model, s_next, dt, h, lo, hi, app, t0, t1, kick_first, listing, backoff, wide2):
     """First half of a sub-step for the active members t0..t1-1 of a block: half kick,
     drift (in member order: sequential memory); the others' position ``at``. The forces at
     s_next follow (_forces), once every member has drifted. ``kick_first``: the previous
@@ -1376,7 +1395,9 @@ def _kick_drift(cs, model, s_next, dt, h, lo, hi, app, t0, t1, kick_first, listi
     ``listing``: also list the members forced at s_next (ACTIVE) in cs.go, in member
     order, for _forces ("Lists instead of scans"); returns how many (else 0). A retired
     member whose quiet time ends by s_next is forced again (it may try to retire again
-    ``backoff`` sub-steps on)."""
+    ``backoff`` sub-steps on). A member whose |δx|² reaches ``wide2`` (the near filter's
+    slack; inf: never) has its and its partners' rows widened (_widen) and is forced at
+    s_next, retired or not."""
     inv_m = 1.0 / model.mass
     inv_i = 1.0 / model.inertia
     active, dev, ft, dev_max, go = cs.active, cs.dev, cs.ft, cs.dev_max, cs.go
@@ -1394,6 +1415,10 @@ def _kick_drift(cs, model, s_next, dt, h, lo, hi, app, t0, t1, kick_first, listi
             dev[a, c] += h * dev[a, 3 + c]
         dd = dev[a, 0] ** 2 + dev[a, 1] ** 2 + dev[a, 2] ** 2
         if dd > dev_max[a]:
+            if dev_max[a] < wide2 and dd >= wide2:
+                _widen(cs, a)
+                if active[a] == RETIRED:
+                    cs.retry[a] = s_next  # forced now: its quiet time did not look at its far partners
             dev_max[a] = dd
         if listing and active[a] == RETIRED and s_next >= cs.retry[a]:
             _force_again(cs, a, s_next, dt, h, backoff)  # its quiet time (_quiet_until) is over
@@ -1942,6 +1967,62 @@ def _near_first(nbr, image, touch, shear, near, nx, r0, r1, m):
         near[p] = 1 if p - r0 < m else 0
 
 
+@njit(cache=True, no_cfunc_wrapper=True, inline="always")
+def _far_slack(ph, d):
+    """2σ less room for rounding: two deviations that add up to less than this cannot bring
+    a far pair into touch (_near_pairs found its paths further apart than d + 2σ)."""
+    return _near_band(ph) - 2e-9 * d
+
+
+@njit(cache=True, no_cfunc_wrapper=True, inline="always")
+def _wide_dev2(ph, d):
+    """|δx|² from which a member's far pairs are looked at (_widen): half the far slack,
+    so that a pair of two members below it is certified by their deviations alone
+    (_conflicts). A filter with no slack (σ = 0) has none to spare: its far pairs are left
+    to _conflicts, which redoes the phase."""
+    half = 0.5 * _far_slack(ph, d)
+    return half * half if half > 0.0 else np.inf
+
+
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False)
+def _widen(cs, a):
+    """Member a's deviation has reached the near filter's slack ("Near pairs"): its row and
+    those of its partners in its block are put back in list order with every entry near
+    (_whole_row), so that each looks at the other from now on, and any far pair left is one
+    of two members below the slack (certified by _conflicts without a redo). In list order:
+    a pair that was far may touch now, and a row's sum then takes its terms in the order
+    the unfiltered phase does (the same bits)."""
+    cs.widened[0] += 1
+    _whole_row(cs, a)
+    blk = cs.block[a]
+    for k in range(cs.rs[a], cs.rs[a] + cs.rc[a]):
+        b = cs.nbr[k]
+        if cs.block[b] == blk and cs.has_row[b] != 0:
+            _whole_row(cs, b)
+
+
+@njit(cache=True, no_cfunc_wrapper=True, inline="always", _nrt=False)
+def _whole_row(cs, a):
+    """Member a's row (if _near_first reordered it) back in list order, every entry near:
+    each entry swapped to the place nx says it came from until every place holds its own."""
+    r0, r1 = cs.rs[a], cs.rs[a] + cs.rc[a]
+    if cs.has_row[a] == 0 or cs.nn[a] == r1 - r0:
+        return
+    nbr, image, touch, shear, near, nx = cs.nbr, cs.image, cs.touch, cs.shear, cs.near, cs.nx
+    for p in range(r0, r1):
+        while nx[p] != p:
+            k = nx[p]
+            nbr[p], nbr[k] = nbr[k], nbr[p]
+            touch[p], touch[k] = touch[k], touch[p]
+            nx[p], nx[k] = nx[k], nx[p]
+            for c in range(3):
+                image[p, c], image[k, c] = image[k, c], image[p, c]
+                shear[p, c], shear[k, c] = shear[k, c], shear[p, c]
+    for p in range(r0, r1):
+        near[p] = 1
+    cs.nn[a] = r1 - r0
+
+
 @njit(cache=True, no_cfunc_wrapper=True)
 def _give_row(cs, a, x0w, st, cl, bc, ph):
     """A row for member a (a woken list neighbour): its neighbours that are not members
@@ -2053,7 +2134,7 @@ def _substep_part(part, cs, st, bc, model, s, dt, h, lo, hi, app, blk, lanes, wo
         v = as_tuple(cs, SubstepSet)  # the hot loops read tuples (grains/refs.py)
         if part == KICK_DRIFT or part == KICK_KICK_DRIFT:
             # the flags as run-time values (part < 0: False), as in _run_block
-            _kick_drift(v, model, s, dt, h, lo, hi, app, t0, t1, part == KICK_KICK_DRIFT, part < 0, 0.0)
+            _kick_drift(v, model, s, dt, h, lo, hi, app, t0, t1, part == KICK_KICK_DRIFT, part < 0, 0.0, np.inf)
         elif part == FORCES:
             woke[q] = _forces(v, as_tuple(st, GrainState), as_tuple(bc, BedContext), model, s, dt, h,
                               lo, hi, app, blk, t0, t1, 0.0, part < 0)[0]
@@ -2071,7 +2152,9 @@ def _run_block(cs, cand, c0, c1, lo, hi, blk, x0w, st, bc, model, cl, ph, dt, n_
     h = dt / n_sub
     app = cs.n[0]
     backoff = ph.retire_backoff[0]
+    wide2 = _wide_dev2(ph, model.diameter)
     cs.retired[0] = 0
+    cs.widened[0] = 0
     n_act = 0  # active members of the block
     done = 0
     woken = 0
@@ -2108,7 +2191,7 @@ def _run_block(cs, cand, c0, c1, lo, hi, blk, x0w, st, bc, model, cl, ph, dt, n_
                                    lanes, woke)
         else:
             m = _block_size(v, lo, hi, app)
-            n_go = _kick_drift(v, model, s_next, dt, h, lo, hi, app, first, m, k > 0, listed, backoff)
+            n_go = _kick_drift(v, model, s_next, dt, h, lo, hi, app, first, m, k > 0, listed, backoff, wide2)
             n_woke, left = _forces(v, sv, bv, model, s_next, dt, h, lo, hi, app, blk, first, n_go, backoff, listed)
             cs.retired[0] += left
         if n_woke > 0:
@@ -2342,6 +2425,7 @@ def soft_contact_phase(state, x0w, model, cl, phase, bed, t0, step, dt, n_sub, c
     d = model.diameter
     box, per = lst.grid.box, lst.grid.periodic
     wakes0, done0, retired0 = ph.counters[WAKES], ph.counters[SUBSTEPPED], ph.counters[RETIRED_SUBSTEPS]
+    widened0 = ph.counters[WIDENED]
     forced = np.empty(0, np.int64)  # groups joined after a failed pass (_conflicts)
     passes = 0
     filtered = ph.near_slack[0] < np.inf  # far pairs not looked at ("Near pairs")
@@ -2362,6 +2446,7 @@ def soft_contact_phase(state, x0w, model, cl, phase, bed, t0, step, dt, n_sub, c
                                          ph, dt, n_sub, lanes)
             ph.counters[SUBSTEPPED] += done
             ph.counters[RETIRED_SUBSTEPS] += cs.retired[0]
+            ph.counters[WIDENED] += cs.widened[0]
             ph.counters[WAKES] += woken
             if lanes > 1:
                 ph.counters[PARALLEL_BLOCKS] += 1
@@ -2372,7 +2457,7 @@ def soft_contact_phase(state, x0w, model, cl, phase, bed, t0, step, dt, n_sub, c
         if n_blocks > 1 and forced.shape[0] == 0:
             forced = np.arange(mstart[n_blocks])  # the same members in every pass
         joined = forced.copy() if filtered else forced
-        n_bad, n_far = _conflicts(cs, dt, d, box, per, joined, new, mstart, _near_band(ph) - 2e-9 * d)
+        n_bad, n_far = _conflicts(cs, dt, d, box, per, joined, new, mstart, _far_slack(ph, d))
         tic = _lap(ph, CLOCK_CONFLICTS, tic)
         if n_bad == 0 and n_far == 0:
             break
@@ -2393,6 +2478,7 @@ def soft_contact_phase(state, x0w, model, cl, phase, bed, t0, step, dt, n_sub, c
         ph.counters[WAKES] = wakes0
         ph.counters[SUBSTEPPED] = done0
         ph.counters[RETIRED_SUBSTEPS] = retired0
+        ph.counters[WIDENED] = widened0
         tic = _lap(ph, CLOCK_CONFLICTS, tic)
     over = _scatter(cs, st, lst, bc, ph, skin_half)
     if over > 0:

@@ -358,6 +358,10 @@ class Stepper:
             out["redone_unfiltered_is"] = ("contact phases redone without the near-pair filter because a pair it "
                                            "had not looked at came near (contacts/phase.py, \"Near pairs\"); the "
                                            "result is the same either way")
+            out["contact_rows_widened"] = int(self.ph.counters[phase.WIDENED])
+            out["rows_widened_are"] = ("grains whose deviation from free flight reached the near-pair filter's "
+                                       "slack in a step, after which they and their partners looked at every pair "
+                                       "(contacts/phase.py, \"Near pairs\"); the result is the same either way")
             out["contact_substeps_retired"] = int(self.ph.counters[phase.RETIRED_SUBSTEPS])
             out["substeps_retired_are"] = ("grain-sub-steps (of substepped_grain_substeps) of grains that touched "
                                            "nothing and were sure to stay so unforced: moved on without looking for "
