@@ -790,6 +790,13 @@ def print_estimate(est):
               + " ".join(f"{x['core_s'] / 3600:>12.1f}" for x in xs))
     print("* not measured: linear in C between the measured concentrations, constant beyond them; F: measured on "
           "the paper's domain (else on the reduced one)")
+    measured = [x["concentration_pct"] for x in est["cases"] if not x["interpolated"]]
+    below = sorted({round(x["concentration_pct"], 2) for x in est["cases"]
+                    if x["interpolated"] and measured and x["concentration_pct"] < min(measured)})
+    if below:
+        print(f"  WARNING: {', '.join(f'{c:g}' for c in below)} % lie below the lowest measured concentration "
+              f"({min(measured):.2f} %) and take its cost per grain-step, which the dilute cases do not have (a "
+              "denser layer costs more): measure them, or add a run that does (--with-json)")
     print(f"  total {est['core_s'] / 3600:.0f} core-hours; wall time {est['days_even_split']:.1f} days split evenly over "
           f"{est['workers']} workers, {est['days_longest_first']:.1f} days with longest-case-first scheduling "
           f"(longest case {est['longest_case_s'] / 86400:.1f} days)")

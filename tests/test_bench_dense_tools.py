@@ -1,6 +1,7 @@
 """benchmarks/bench_dense.py's tools: --spinup-states (a saved spin-up comes back as it was
 saved, and a file made for another case, or not a saved spin-up at all, is refused by
-name) and the count of touching pairs (the same as a direct count over all pairs)."""
+name), the count of touching pairs (the same as a direct count over all pairs), and the
+estimate's warning when it extrapolates below the measured concentrations."""
 import sys
 from pathlib import Path
 from typing import NamedTuple
@@ -78,3 +79,18 @@ def test_touching_pairs_are_those_of_a_direct_count(bench):
     direct = int((r2 < 1.0).sum()) // 2
     assert direct > 40
     assert bench._touching(pos, lx, lz) == (direct, int((pos[:, 1] < 0.5).sum()))
+
+
+def _estimate(measured):
+    cases = [{"concentration_pct": c, "tau_ratio": 1.79, "steps": 100, "n": 10, "us_per_grain_step": 2.0,
+              "interpolated": c not in measured, "core_s": 3600.0} for c in (0.04, 0.52, 2.07, 3.94)]
+    return {"sweep": "concentration_sweep.toml", "cases": cases, "workers": 2, "core_s": 4 * 3600.0,
+            "days_even_split": 1.0, "days_longest_first": 1.0, "longest_case_s": 3600.0}
+
+
+def test_the_estimate_warns_when_it_extrapolates_below_the_lowest_measured_concentration(bench, capsys):
+    bench.print_estimate(_estimate({2.07, 3.94}))
+    out = capsys.readouterr().out
+    assert "WARNING: 0.04, 0.52 % lie below the lowest measured concentration (2.07 %)" in out
+    bench.print_estimate(_estimate({0.04, 0.52, 2.07, 3.94}))
+    assert "WARNING" not in capsys.readouterr().out
