@@ -225,6 +225,21 @@ def test_a_member_that_deviates_by_the_slack_widens_the_rows_instead_of_redoing_
     np.testing.assert_array_equal(narrow[2].counters[:3], plain[2].counters[:3])
 
 
+def test_a_block_cut_into_lanes_widens_the_rows_too_instead_of_redoing_the_phase():
+    # as above, with the block's sub-steps cut into lanes on two threads: the members that
+    # reach the slack are widened between the drift and the forces, lane by lane
+    box, pos, vel = _layer(12.0, 5)
+    plain = _run(pos, vel, 1, box, 0.6, 5, 0.02, near_slack=np.inf)
+    lanes = _run(pos, vel, 10 ** 9, box, 0.6, 5, 0.02, threads=TWO_THREADS, parallel_members=(6, 2),
+                 near_slack=0.02)
+    if TWO_THREADS > 1:
+        assert lanes[2].counters[PARALLEL_BLOCKS] > 0
+    assert lanes[2].counters[WIDENED] >= 5
+    assert lanes[2].counters[REDONE_FAR] == 0
+    _same(lanes, plain)
+    np.testing.assert_array_equal(lanes[2].counters[:3], plain[2].counters[:3])
+
+
 def test_near_entries_go_first_in_row_order_and_remember_their_list_entries():
     # one row at places 5..27 of the set's row arrays, 9 of its 23 entries near
     from saltation.contacts.phase import _near_first

@@ -285,8 +285,9 @@ both grains from then on. Any far pair left has both members below σ, which _co
 certifies without computing a gap, and no phase is redone for a far pair. The same bits:
 a pair looked at while apart adds nothing, and a widened row sums its terms in list order,
 as the unfiltered phase does. ``counters[WIDENED]`` counts the widened members. In a
-block cut into lanes (_substep_part) nothing is widened: rows are shared between lanes,
-so there a far pair that came near still redoes the phase.
+block cut into lanes (_substep_part) rows are shared between lanes: there each lane lists
+its members that reached σ in its drift, and they are widened after every lane's drift,
+before the forces (nothing reads a row in between), lane by lane: the same rows.
 
 Retired members. At 3.94 % more than half of the active grain-sub-steps come after the
 grain's last contact in the step (it left the bed layer, or a neighbour), or before its
@@ -1413,7 +1414,9 @@ def _kick_drift(cs, model, s_next, dt, h, lo, hi, app, t0, t1, kick_first, listi
     member whose quiet time ends by s_next is forced again (it may try to retire again
     ``backoff`` sub-steps on). A member whose |δx|² reaches ``wide2`` (the near filter's
     slack; inf: never) has its and its partners' rows widened (_widen) and is forced at
-    s_next, retired or not."""
+    s_next, retired or not; in a lane (not ``listing``: rows are shared between lanes) it
+    is listed in cs.go from place t0 instead, widened by _substep_part once every lane has
+    drifted (nothing reads a row before the forces), and the count returned."""
     inv_m = 1.0 / model.mass
     inv_i = 1.0 / model.inertia
     active, dev, ft, dev_max, go = cs.active, cs.dev, cs.ft, cs.dev_max, cs.go
@@ -1432,9 +1435,13 @@ def _kick_drift(cs, model, s_next, dt, h, lo, hi, app, t0, t1, kick_first, listi
         dd = dev[a, 0] ** 2 + dev[a, 1] ** 2 + dev[a, 2] ** 2
         if dd > dev_max[a]:
             if dev_max[a] < wide2 and dd >= wide2:
-                _widen(cs, a)
-                if active[a] == RETIRED:
-                    cs.retry[a] = s_next  # forced now: its quiet time did not look at its far partners
+                if listing:
+                    _widen(cs, a)
+                    if active[a] == RETIRED:
+                        cs.retry[a] = s_next  # forced now: its quiet time did not look at its far partners
+                else:
+                    go[t0 + n_go] = a  # a lane (none retires there): widened after the pass
+                    n_go += 1
             dev_max[a] = dd
         if listing and active[a] == RETIRED and s_next >= cs.retry[a]:
             _force_again(cs, a, s_next, dt, h, backoff)  # its quiet time (_quiet_until) is over
@@ -2136,13 +2143,15 @@ KICK_DRIFT, FORCES, KICK, KICK_KICK_DRIFT = 0, 1, 2, 3
 
 
 @njit(cache=True, no_cfunc_wrapper=True, parallel=True)
-def _substep_part(part, cs, st, bc, model, s, dt, h, lo, hi, app, blk, lanes, woke):
+def _substep_part(part, cs, st, bc, model, s, dt, h, lo, hi, app, blk, lanes, woke, wide2):
     """One part of a sub-step of a large block (KICK_DRIFT, FORCES, KICK or
     KICK_KICK_DRIFT), its members cut into ``lanes`` contiguous ranges done in parallel.
     Every member's arithmetic is its own (_forces), so the result is that of one thread,
     bit for bit. Returns the count of _forces (FORCES), else 0. No member retires here
     (_quiet_until needs the members one after another; on two threads retiring them
-    afterwards, one after another, measured slower, not faster)."""
+    afterwards, one after another, measured slower, not faster). The members whose
+    deviation reached ``wide2`` in the drift are widened after it, lane by lane, each in
+    member order (_kick_drift; their rows are read first by the forces)."""
     m = _block_size(cs, lo, hi, app)
     for q in prange(lanes):
         t0 = np.int64(q) * m // lanes
@@ -2150,13 +2159,22 @@ def _substep_part(part, cs, st, bc, model, s, dt, h, lo, hi, app, blk, lanes, wo
         v = as_tuple(cs, SubstepSet)  # the hot loops read tuples (grains/refs.py)
         if part == KICK_DRIFT or part == KICK_KICK_DRIFT:
             # the flags as run-time values (part < 0: False), as in _run_block
-            _kick_drift(v, model, s, dt, h, lo, hi, app, t0, t1, part == KICK_KICK_DRIFT, part < 0, 0.0, np.inf)
+            woke[q] = _kick_drift(v, model, s, dt, h, lo, hi, app, t0, t1, part == KICK_KICK_DRIFT, part < 0, 0.0,
+                                  wide2)
         elif part == FORCES:
             woke[q] = _forces(v, as_tuple(st, GrainState), as_tuple(bc, BedContext), model, s, dt, h,
                               lo, hi, app, blk, t0, t1, 0.0, part < 0)[0]
         else:
             _kick(v, model, h, lo, hi, app, t0, t1)
-    return woke[:lanes].sum() if part == FORCES else 0
+    if part == FORCES:
+        return woke[:lanes].sum()
+    if part == KICK_DRIFT or part == KICK_KICK_DRIFT:
+        v = as_tuple(cs, SubstepSet)
+        for q in range(lanes):
+            t0 = np.int64(q) * m // lanes
+            for i in range(woke[q]):
+                _widen(v, v.go[t0 + i])
+    return 0
 
 
 @njit(cache=True, no_cfunc_wrapper=True)
@@ -2202,9 +2220,9 @@ def _run_block(cs, cand, c0, c1, lo, hi, blk, x0w, st, bc, model, cl, ph, dt, n_
         # the previous sub-step's second half kick is done in this pass (from k = 1)
         if lanes > 1:
             part = KICK_KICK_DRIFT if k > 0 else KICK_DRIFT
-            _substep_part(np.int64(part), cs, st, bc, model, s_next, dt, h, lo, hi, app, blk, lanes, woke)
+            _substep_part(np.int64(part), cs, st, bc, model, s_next, dt, h, lo, hi, app, blk, lanes, woke, wide2)
             n_woke = _substep_part(np.int64(FORCES), cs, st, bc, model, s_next, dt, h, lo, hi, app, blk,
-                                   lanes, woke)
+                                   lanes, woke, wide2)
         else:
             m = _block_size(v, lo, hi, app)
             n_go = _kick_drift(v, model, s_next, dt, h, lo, hi, app, first, m, k > 0, listed, backoff, wide2)
@@ -2218,7 +2236,7 @@ def _run_block(cs, cand, c0, c1, lo, hi, blk, x0w, st, bc, model, cl, ph, dt, n_
             v = as_tuple(cs, SubstepSet)
     # the last sub-step's second half kick
     if lanes > 1:
-        _substep_part(np.int64(KICK), cs, st, bc, model, 1.0, dt, h, lo, hi, app, blk, lanes, woke)
+        _substep_part(np.int64(KICK), cs, st, bc, model, 1.0, dt, h, lo, hi, app, blk, lanes, woke, wide2)
     else:
         _kick(v, model, h, lo, hi, app, first, _block_size(v, lo, hi, app))
     return cs, done, woken
