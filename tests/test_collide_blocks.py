@@ -241,7 +241,8 @@ def test_a_block_cut_into_lanes_widens_the_rows_too_instead_of_redoing_the_phase
 
 
 def test_near_entries_go_first_in_row_order_and_remember_their_list_entries():
-    # one row at places 5..27 of the set's row arrays, 9 of its 23 entries near
+    # one row at places 5..27 of the set's row arrays, 9 of its 23 entries near, listed as
+    # _near_pairs lists them: the near ones from the front, the far ones from the back
     from saltation.contacts.phase import _near_first
     rng = np.random.default_rng(4)
     r0, r1, size = 5, 28, 40
@@ -249,16 +250,18 @@ def test_near_entries_go_first_in_row_order_and_remember_their_list_entries():
     image = rng.normal(size=(size, 3))
     touch = rng.integers(0, 2, size).astype(np.uint8)
     shear = rng.normal(size=(size, 3))
-    near = np.ones(size, np.uint8)
-    near[r0:r1] = 0
-    near[r0 + rng.choice(r1 - r0, 9, replace=False)] = 1
+    is_near = np.zeros(r1 - r0, bool)
+    is_near[rng.choice(r1 - r0, 9, replace=False)] = True
+    order = np.concatenate([np.flatnonzero(is_near), np.flatnonzero(~is_near)]) + r0
     nx = np.arange(size)
-    before = [a.copy() for a in (nbr, image, touch, shear, near)]
-    order = np.concatenate([np.flatnonzero(near[r0:r1]), np.flatnonzero(near[r0:r1] == 0)]) + r0
-    _near_first(nbr, image, touch, shear, near, nx, r0, r1, 9)
+    nx[r0:r0 + 9] = order[:9]
+    nx[r0 + 9:r1] = order[9:][::-1]
+    before = [a.copy() for a in (nbr, image, touch, shear)]
+    _near_first(nbr, image, touch, shear, nx, r0, r1, 9)
     np.testing.assert_array_equal(nx[r0:r1], order)  # where each place came from
-    for got, old in zip((nbr, image, touch, shear), before[:4], strict=True):
+    np.testing.assert_array_equal(nx[:r0], np.arange(r0))
+    np.testing.assert_array_equal(nx[r1:], np.arange(r1, size))
+    for got, old in zip((nbr, image, touch, shear), before, strict=True):
         np.testing.assert_array_equal(got[r0:r1], old[order])
         np.testing.assert_array_equal(got[:r0], old[:r0])  # other rows untouched
         np.testing.assert_array_equal(got[r1:], old[r1:])
-    np.testing.assert_array_equal(near[r0:r1], np.arange(r1 - r0) < 9)

@@ -549,7 +549,6 @@ class SubstepSet(NamedTuple):
     nbr: np.ndarray  # (R,) int64 neighbour (member index)
     shear: np.ndarray  # (R, 3) tangential spring
     touch: np.ndarray  # (R,) uint8
-    near: np.ndarray  # (R,) uint8 the pair's free-flight paths come within d + 2 NEAR_SLACK ("Near pairs")
     collisions: np.ndarray  # (C,) int64 (the ContactList's counters, copied in and out)
     max_overlap: np.ndarray  # (C,)
     n_touch: np.ndarray  # (C,) int64
@@ -569,7 +568,7 @@ class SubstepSet(NamedTuple):
     block: np.ndarray  # (C,) int64 the block the member is sub-stepped in ("Blocks")
     jump_n0: np.ndarray  # (C,) int64 the grain's jump_buf_n and jump_count when its row was
     jump_c0: np.ndarray  # (C,) int64 copied in (restored if the phase is redone unblocked)
-    nn: np.ndarray  # (C,) int64 near entries of the row: its first nn ("Near pairs")
+    nn: np.ndarray  # (C,) int64 near entries of the row (free-flight paths within d + 2 NEAR_SLACK): its first nn
     nx: np.ndarray  # (R,) int64 where each row entry was set (_set_row): its list entry is nx − rs
     at: np.ndarray  # (C, 3) every member's position at the sub-step being evaluated (_at)
     image: np.ndarray  # (R, 3) periodic-image shift of row entry k for the step (_set_row)
@@ -597,7 +596,7 @@ def _make_set(c, r):
         np.empty((c, 18)), np.empty((c, 9)), np.empty((c, 9)), np.empty((c, 6)), np.empty(c), np.empty(c),
         np.empty(c, np.uint8), np.empty(c, np.uint8), np.empty(c, np.uint8), np.empty(c, np.uint8),
         np.empty(c, np.int64), np.empty(c, np.int64), np.empty(c, np.int64), np.empty(r, np.int64),
-        np.empty((r, 3)), np.empty(r, np.uint8), np.empty(r, np.uint8), np.empty(c, np.int64), np.empty(c),
+        np.empty((r, 3)), np.empty(r, np.uint8), np.empty(c, np.int64), np.empty(c),
         np.empty(c, np.int64), np.empty(c, np.int64), np.empty(c), np.empty(c), np.empty((c, BED_SLOTS), np.int64),
         np.empty((c, BED_SLOTS, 3)), np.empty((c, BED_SLOTS, 3)), np.empty(c, np.uint8), np.empty(c, np.int64),
         np.empty((c, 3)), np.empty(c, np.int64), np.empty(c), np.empty(c), np.empty(c), np.empty(c, np.int64),
@@ -642,7 +641,7 @@ def _grow(cs, c, r):
         _resized(cs.dev, c), _resized(cs.ft, c), _resized(cs.dev_max, c), _resized(cs.start, c),
         _resized(cs.active, c), _resized(cs.wake, c), _resized(cs.touched, c), _resized(cs.has_row, c),
         _resized(cs.queue, c), _resized(cs.rs, c), _resized(cs.rc, c), _resized(cs.nbr, r), _resized(cs.shear, r),
-        _resized(cs.touch, r), _resized(cs.near, r), _resized(cs.collisions, c), _resized(cs.max_overlap, c),
+        _resized(cs.touch, r), _resized(cs.collisions, c), _resized(cs.max_overlap, c),
         _resized(cs.n_touch, c),
         _resized(cs.contact_substeps, c), _resized(cs.overlap_sum, c), _resized(cs.bed_overlap_max, c),
         _resized(cs.slot_id, c), _resized(cs.slot_c, c), _resized(cs.slot_shear, c), _resized(cs.in_bed, c),
@@ -1558,7 +1557,6 @@ def _set_row(cs, a, st, cl, bc, ph):
         cs.nbr[r0 + k] = b
         for c in range(3):
             cs.image[r0 + k, c] = image_shift(cs.path[a, c] - cs.path[b, c], box[c], per[c])
-        cs.near[r0 + k] = 1  # until _near_pairs says otherwise
         cs.nx[r0 + k] = r0 + k
         cs.touch[r0 + k] = cl.touch[g, k]
         for c in range(3):
@@ -1924,70 +1922,67 @@ def _fill(cs, members, x0w, st, cl, bc, ph, cand, key):
 
 @njit(cache=True, no_cfunc_wrapper=True, parallel=True)
 def _near_pairs(cs, cand, box, per, dt, limit):
-    """near[k] = 0 for the row entries of the candidates ``cand`` whose free-flight paths
-    stay further apart than ``limit`` over the step (_path_gap) and that are not in
-    contact from the last step ("Near pairs"); the others (nn of them) moved to the row's
-    front, in row order, the far ones after them (_near_first). Each candidate writes
-    only its own row: the candidates run on all threads."""
+    """The row entries of the candidates ``cand`` whose free-flight paths come within
+    ``limit`` over the step (_path_gap) or that are in contact from the last step (the
+    near ones, nn of them) moved to the row's front, in row order, the far ones after them
+    (_near_first; "Near pairs"). Each candidate writes only its own row: the candidates
+    run on all threads."""
     # arrays unpacked before the parallel loop: Numba 0.68 drops writes made in a prange
     # body through a named tuple's arrays (flight/spheres.py)
-    path, rs, rc, nbr, touch, near, nx, nn = cs.path, cs.rs, cs.rc, cs.nbr, cs.touch, cs.near, cs.nx, cs.nn
+    path, rs, rc, nbr, touch, nx, nn = cs.path, cs.rs, cs.rc, cs.nbr, cs.touch, cs.nx, cs.nn
     image, shear = cs.image, cs.shear
     for t in prange(cand.shape[0]):
         a = cand[t]
         r0 = rs[a]
         r1 = r0 + rc[a]
         m = 0
-        for k in range(r0, r1):
+        for k in range(r0, r1):  # nx: the near entries from the front, the far ones from the back
             if touch[k] == 0 and _member_gap(path, a, nbr[k], box, per, dt) > limit:
-                near[k] = 0
+                nx[r1 - 1 - (k - r0 - m)] = k
             else:
+                nx[r0 + m] = k
                 m += 1
         nn[a] = m
         if m < r1 - r0:
-            _near_first(nbr, image, touch, shear, near, nx, r0, r1, m)
+            _near_first(nbr, image, touch, shear, nx, r0, r1, m)
 
 
 @njit(cache=True, no_cfunc_wrapper=True, inline="always", _nrt=False)
-def _near_first(nbr, image, touch, shear, near, nx, r0, r1, m):
-    """Row r0..r1 (m of its entries near) with its near entries first and its far ones
-    after them, each in row order, so every sum over the near entries keeps its order (the
-    same bits). In place: nx[p] is set to the entry that goes to place p and the row
-    follows its cycles (``near`` marking the places done), then near[p] = 1 for its first
-    m places. nx keeps where each place came from (as _set_row wrote the row: entry k is
-    list entry k − r0): _scatter_set writes the contact history back there."""
-    p = r0
-    for k in range(r0, r1):
-        if near[k] != 0:
-            nx[p] = k
-            p += 1
-    for k in range(r0, r1):
-        if near[k] == 0:
-            nx[p] = k
-            p += 1
+def _near_first(nbr, image, touch, shear, nx, r0, r1, m):
+    """Row r0..r1 with its m near entries first and its far ones after them, each in row
+    order, so every sum over the near entries keeps its order (the same bits). ``nx``
+    lists the near entries in row order from r0 and the far ones in reverse from r1 − 1
+    (as _near_pairs finds them); the far ones are turned round, and the row then follows
+    the permutation's cycles in place (a place done is marked by −(nx + 1)). Afterwards
+    nx[p] is the entry that went to place p, i.e. where it came from (as _set_row wrote the
+    row: entry k is list entry k − r0): _scatter_set writes the contact history back there."""
+    p, q = r0 + m, r1 - 1
+    while p < q:
+        nx[p], nx[q] = nx[q], nx[p]
+        p += 1
+        q -= 1
     for p in range(r0, r1):
-        near[p] = 0
-    for p in range(r0, r1):
-        if near[p] != 0 or nx[p] == p:
-            near[p] = 1
+        k = nx[p]
+        if k < 0 or k == p:
             continue
         b, i0, i1, i2 = nbr[p], image[p, 0], image[p, 1], image[p, 2]
         t, s0, s1, s2 = touch[p], shear[p, 0], shear[p, 1], shear[p, 2]
         q = p
-        while nx[q] != p:
-            k = nx[q]
+        while k != p:
             nbr[q] = nbr[k]
             touch[q] = touch[k]
             for c in range(3):
                 image[q, c] = image[k, c]
                 shear[q, c] = shear[k, c]
-            near[q] = 1
+            nx[q] = -k - 1
             q = k
+            k = nx[q]
         nbr[q], image[q, 0], image[q, 1], image[q, 2] = b, i0, i1, i2
         touch[q], shear[q, 0], shear[q, 1], shear[q, 2] = t, s0, s1, s2
-        near[q] = 1
+        nx[q] = -p - 1
     for p in range(r0, r1):
-        near[p] = 1 if p - r0 < m else 0
+        if nx[p] < 0:
+            nx[p] = -nx[p] - 1
 
 
 @njit(cache=True, no_cfunc_wrapper=True, inline="always")
@@ -2026,12 +2021,13 @@ def _widen(cs, a):
 
 @njit(cache=True, no_cfunc_wrapper=True, inline="always", _nrt=False)
 def _whole_row(cs, a):
-    """Member a's row (if _near_first reordered it) back in list order, every entry near:
-    each entry swapped to the place nx says it came from until every place holds its own."""
+    """Member a's row (if _near_first reordered it) back in list order, every entry near
+    (nn = rc): each entry swapped to the place nx says it came from until every place
+    holds its own."""
     r0, r1 = cs.rs[a], cs.rs[a] + cs.rc[a]
     if cs.has_row[a] == 0 or cs.nn[a] == r1 - r0:
         return
-    nbr, image, touch, shear, near, nx = cs.nbr, cs.image, cs.touch, cs.shear, cs.near, cs.nx
+    nbr, image, touch, shear, nx = cs.nbr, cs.image, cs.touch, cs.shear, cs.nx
     for p in range(r0, r1):
         while nx[p] != p:
             k = nx[p]
@@ -2041,8 +2037,6 @@ def _whole_row(cs, a):
             for c in range(3):
                 image[p, c], image[k, c] = image[k, c], image[p, c]
                 shear[p, c], shear[k, c] = shear[k, c], shear[p, c]
-    for p in range(r0, r1):
-        near[p] = 1
     cs.nn[a] = r1 - r0
 
 
@@ -2260,7 +2254,7 @@ def _group_of(cs, a, cell_of, forced, mstart):
 def _conflicts(cs, dt, d, box, per, forced, new, mstart, far_slack):
     """The pairs of members that may have touched although their sub-steps did not look at
     each other: for every pair in an active member's row that is in another block
-    ("Blocks") or far (near = 0, "Near pairs"), the free-flight paths come closer than d
+    ("Blocks") or far (not among its first nn, "Near pairs"), the free-flight paths come closer than d
     plus the largest deviations the two had. The groups of each such pair across blocks
     are joined in ``forced`` (an appended member, whose group is not known, joins its
     whole block). Returns their numbers (across blocks, far in one block): (0, 0)
@@ -2271,7 +2265,7 @@ def _conflicts(cs, dt, d, box, per, forced, new, mstart, far_slack):
     m0 = mstart[mstart.shape[0] - 1]
     cell_of = np.empty(0, np.int64)  # set index → index in cell order (the gather's), when needed
     # the set's arrays as locals: a StructRef's field is loaded (and counted) at every read
-    path, active, dev_max, near = cs.path, cs.active, cs.dev_max, cs.near
+    path, active, dev_max, nn = cs.path, cs.active, cs.dev_max, cs.nn
     rs, rc, nbr, block = cs.rs, cs.rc, cs.nbr, cs.block
     n_bad = 0
     n_far = 0
@@ -2282,7 +2276,7 @@ def _conflicts(cs, dt, d, box, per, forced, new, mstart, far_slack):
         for k in range(rs[a], rs[a] + rc[a]):
             b = nbr[k]
             across = block[b] != block[a]
-            if not across and near[k] != 0:
+            if not across and k - rs[a] < nn[a]:
                 continue
             db = math.sqrt(dev_max[b]) if active[b] != 0 else 0.0
             if not across and da + db < far_slack:
