@@ -94,3 +94,20 @@ def test_the_estimate_warns_when_it_extrapolates_below_the_lowest_measured_conce
     assert "WARNING: 0.04, 0.52 % lie below the lowest measured concentration (2.07 %)" in out
     bench.print_estimate(_estimate({0.04, 0.52, 2.07, 3.94}))
     assert "WARNING" not in capsys.readouterr().out
+
+
+def test_a_paper_domain_measurement_replaces_the_reduced_one_of_the_same_concentration(bench):
+    # the two sweeps' grain counts give concentrations that differ in the third decimal
+    # (1.0294 % reduced, 1.0300 % on the paper's domain): they are the same case's
+    sweep = Path(__file__).resolve().parents[1] / "cases" / "concentration_sweep.toml"
+    rows = [{"concentration_pct": c, "domain": dom, "runs": {"1": {"us_per_grain_step": us}}}
+            for c, dom, us in ((0.0399764, "reduced", 1.0), (1.0293924, "reduced", 3.5), (1.0299853, "paper", 4.0),
+                               (3.9405312, "reduced", 9.0), (3.9399873, "paper", 13.0))]
+    est = bench.sweep_estimate(rows, sweep)
+    by_c = {}
+    for case in est["cases"]:
+        by_c.setdefault(round(case["concentration_pct"], 2), set()).add(
+            (case["us_per_grain_step"], case["measured_on_paper_domain"], case["interpolated"]))
+    assert by_c[1.03] == {(4.0, True, False)}
+    assert by_c[3.94] == {(13.0, True, False)}
+    assert by_c[0.04] == {(1.0, False, False)}
