@@ -570,7 +570,7 @@ class SubstepSet(NamedTuple):
     jump_c0: np.ndarray  # (C,) int64 copied in (restored if the phase is redone unblocked)
     nn: np.ndarray  # (C,) int64 near entries of the row (free-flight paths within d + 2 NEAR_SLACK): its first nn
     nx: np.ndarray  # (R,) int64 where each row entry was set (_set_row): its list entry is nx − rs
-    at: np.ndarray  # (C, 4) every member's position at the sub-step being evaluated (_at), and its block
+    at: np.ndarray  # (C, 3) every member's position at the sub-step being evaluated (_at)
     image: np.ndarray  # (R, 3) periodic-image shift of row entry k for the step (_set_row)
     retry: np.ndarray  # (C,) step fraction from which an active member may try to retire; a retired one is forced again
     flagged: np.ndarray  # (C,) int64 scratch: members that touched one not active, in _forces' order
@@ -601,7 +601,7 @@ def _make_set(c, r):
         np.empty((c, BED_SLOTS, 3)), np.empty((c, BED_SLOTS, 3)), np.empty(c, np.uint8), np.empty(c, np.int64),
         np.empty((c, 3)), np.empty(c, np.int64), np.empty(c), np.empty(c), np.empty(c), np.empty(c, np.int64),
         np.empty(c, np.int64), np.empty(c, np.int64), np.empty(c, np.int64), np.empty(r, np.int64),
-        np.empty((c, 4)), np.empty((r, 3)), np.empty(c), np.empty(c, np.int64), np.empty(c, np.int64), np.zeros(1, np.int64),
+        np.empty((c, 3)), np.empty((r, 3)), np.empty(c), np.empty(c, np.int64), np.empty(c, np.int64), np.zeros(1, np.int64),
         np.zeros(1, np.int64),
     )
 
@@ -762,9 +762,8 @@ def _grain_force(a, cs, model, s, dt, h, update, blk):
     damp_n = meff * model.gamma_n
     damp_t = meff * model.gamma_t
     at_radius = model.lever == LEVER_RADIUS
-    cur, active, nbr, shear, touch, at = cs.cur, cs.active, cs.nbr, cs.shear, cs.touch, cs.at
+    cur, active, nbr, shear, touch, block, at = cs.cur, cs.active, cs.nbr, cs.shear, cs.touch, cs.block, cs.at
     image = cs.image
-    blk_at = np.float64(blk)  # at[b, 3]: b's block
     fx = 0.0
     fy = 0.0
     fz = 0.0
@@ -782,7 +781,7 @@ def _grain_force(a, cs, model, s, dt, h, update, blk):
         b = nbr[k]
         rsq = d2
         delx = dely = delz = 0.0
-        if at[b, 3] == blk_at:
+        if block[b] == blk:
             # min_image with the pair's shift of the step (the same bits: cells.image_shift)
             delx = (xi - at[b, 0]) - image[k, 0]
             dely = (yi - at[b, 1]) - image[k, 1]
@@ -1537,7 +1536,6 @@ def _set_member(cs, a, g, x0w, pos, vel, spin, start, blk):
     cs.rs[a] = 0
     cs.rc[a] = 0
     cs.block[a] = blk
-    cs.at[a, 3] = blk  # beside its position: the force loop's test reads the line it reads anyway
 
 
 @njit(cache=True, no_cfunc_wrapper=True, inline="always")
