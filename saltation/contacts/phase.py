@@ -259,11 +259,11 @@ Near pairs. A grain's row holds every list neighbour (cutoff d + skin; in the de
 the skin is widened for the fast grains above it: ~21 entries per engaged grain at 3.94 %),
 but only a few can come near it within the step: ~9 whose free-flight paths come within
 d + 0.4 d (_path_gap), 0.1 actually touching. So the sub-steps look only at the pairs
-whose paths come within d + 2σ, σ = NEAR_SLACK = 0.1 d (``near``, set in the gather by
-``_near_pairs``, which moves a row's near entries to its front, in their order, so the
-sums over them keep theirs and the force loop reads its first ``nn`` entries only, not
-every entry's place looked up; ``nx`` keeps where each came from for the scatter; a pair
-in contact from the last step is always near). Afterwards
+whose paths come within d + 2σ, σ = NEAR_SLACK = 0.1 d (the *near* ones, found in the
+gather by ``_near_pairs``, which moves them to the row's front, in their order, so the
+sums over them keep theirs and the force loop reads the row's first ``nn`` entries only;
+``nx`` keeps where each entry came from for the scatter; a pair in contact from the last
+step is always near). Afterwards
 ``_conflicts`` checks every far pair of an active grain as it checks pairs across blocks:
 path gap − |δx|ₘₐₓ,ᵢ − |δx|ₘₐₓ,ⱼ > d certifies that the pair never touched, so looking at
 it would have added nothing (the same bits); otherwise the phase is redone without the
