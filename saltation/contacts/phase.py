@@ -253,7 +253,11 @@ alternated (2026-12-06): at 3.94 % the sub-steps took 11.55 / 11.50 µs per grai
 step 5.69 / 5.66 → 8.13 / 6.86 × 10⁴ grain-steps/s; the contact phase over the free
 flight of the same run 9.97 / 9.47 → 6.70 / 6.30); at 2.07 %, one run each, 5.66 → 4.97 →
 4.18 (8.77 → 10.6 × 10⁴ grain-steps/s). The same end states. In the reduced cases no
-change stood out of this machine's noise.
+change stood out of this machine's noise. Transparent huge pages for the compiled code's
+allocations (glibc's ``GLIBC_TUNABLES=glibc.malloc.hugetlb=1``; 1.9 GB of huge pages
+instead of 0.55) left the contact phase over the free flight at 3.94 % on the paper's
+domain at 6.99 / 6.59 against 7.05 / 6.77 (alternated, two rounds): the extra cost per
+grain-sub-step at full size is not TLB misses.
 
 Near pairs. A grain's row holds every list neighbour (cutoff d + skin; in the dense layer
 the skin is widened for the fast grains above it: ~21 entries per engaged grain at 3.94 %),
