@@ -1941,8 +1941,7 @@ def _near_pairs(cs, cand, box, per, dt, limit):
         r1 = r0 + rc[a]
         m = 0
         for k in range(r0, r1):  # nx: the near entries from the front, the far ones from the back
-            if touch[k] == 0 and not _within_now(path, image, a, nbr[k], k, limit) and \
-                    _member_gap(path, a, nbr[k], box, per, dt) > limit:
+            if touch[k] == 0 and _member_gap(path, a, nbr[k], box, per, dt) > limit:
                 nx[r1 - 1 - (k - r0 - m)] = k
             else:
                 nx[r0 + m] = k
@@ -1950,18 +1949,6 @@ def _near_pairs(cs, cand, box, per, dt, limit):
         nn[a] = m
         if m < r1 - r0:
             _near_first(nbr, image, touch, shear, nx, r0, r1, m)
-
-
-@njit(cache=True, no_cfunc_wrapper=True, inline="always", error_model="numpy")
-def _within_now(path, image, a, b, k, limit):
-    """Whether members a and b (row entry k) are within ``limit`` of each other at the
-    step's start: then their path gap (_path_gap: at most that distance less TOUCH_EPS) is
-    below it too, and the pair is near without its chord (the same answer, cheaper)."""
-    r2 = 0.0
-    for c in range(3):
-        e = (path[a, c] - path[b, c]) - image[k, c]  # min_image's bits (_set_row)
-        r2 += e * e
-    return r2 <= limit * limit
 
 
 @njit(cache=True, no_cfunc_wrapper=True, inline="always", _nrt=False)
