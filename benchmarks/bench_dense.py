@@ -131,6 +131,14 @@ PERCOLATING_C = 2.07  # %: from here the near-bed layer is one block in the redu
 WORKERS = 2
 
 
+def paper_c(c_pct):
+    """The paper's concentration (%) a realised one stands for: its two decimals. The two
+    sweeps' grain counts make the realised values differ in the third (1.0294 % reduced,
+    1.0300 % on the paper's domain), so every match of two runs' or cases' concentrations
+    goes through this."""
+    return round(c_pct, 2)
+
+
 # --------------------------------------------------------------------------- one concentration
 
 
@@ -607,9 +615,7 @@ def sweep_estimate(rows, path, threads=1):
     for r in rows:
         if "error" in r or str(threads) not in r.get("runs", {}):
             continue
-        # the paper's concentrations have two decimals; the two domains' grain counts make
-        # them differ in the third (1.0294 % reduced, 1.0300 % on the paper's domain)
-        key, full = round(r["concentration_pct"], 2), r.get("domain") == "paper"
+        key, full = paper_c(r["concentration_pct"]), r.get("domain") == "paper"
         if key not in best or (full and not best[key][1]):
             best[key] = (r, full)
     meas = sorted((r["concentration_pct"], r["runs"][str(threads)]["us_per_grain_step"], full)
@@ -620,7 +626,7 @@ def sweep_estimate(rows, path, threads=1):
 
     def cost_us(c):  # µs per grain-step at c (%): measured, else linear in C between measured points
         for x, y, full in meas:
-            if abs(x - c) < 0.005:
+            if paper_c(x) == paper_c(c):
                 return y, False, full
         if c <= cs[0]:
             return meas[0][1], True, False
@@ -784,7 +790,7 @@ def print_estimate(est):
     print(head + "\n" + "-" * len(head))
     by_c = {}
     for x in est["cases"]:
-        by_c.setdefault(round(x["concentration_pct"], 3), []).append(x)
+        by_c.setdefault(paper_c(x["concentration_pct"]), []).append(x)
     for cp, xs in sorted(by_c.items()):
         xs.sort(key=lambda x: x["tau_ratio"])
         mark = "*" if xs[0]["interpolated"] else ("F" if xs[0].get("measured_on_paper_domain") else " ")
@@ -793,7 +799,7 @@ def print_estimate(est):
     print("* not measured: linear in C between the measured concentrations, constant beyond them; F: measured on "
           "the paper's domain (else on the reduced one)")
     measured = [x["concentration_pct"] for x in est["cases"] if not x["interpolated"]]
-    below = sorted({round(x["concentration_pct"], 2) for x in est["cases"]
+    below = sorted({paper_c(x["concentration_pct"]) for x in est["cases"]
                     if x["interpolated"] and measured and x["concentration_pct"] < min(measured)})
     if below:
         print(f"  WARNING: {', '.join(f'{c:g}' for c in below)} % lie below the lowest measured concentration "
@@ -805,7 +811,7 @@ def print_estimate(est):
     print("  assumes: cost per grain-step at a concentration independent of domain size and of tau*/tau*c (measured "
           "at one), the post-spin-up state representative of 200 s, a free core per worker; stepping only (no "
           "outputs: jumps, variances, checkpoints)")
-    reduced = sorted({round(x["concentration_pct"], 2) for x in est["cases"]
+    reduced = sorted({paper_c(x["concentration_pct"]) for x in est["cases"]
                       if x["concentration_pct"] >= PERCOLATING_C - 0.005 and not x.get("measured_on_paper_domain")})
     if reduced:
         print(f"  the domain size does matter where the near-bed layer percolates (from {PERCOLATING_C} %: module "
@@ -825,7 +831,7 @@ def print_targets(rows, est):
     """This run against issue 19's targets, each marked met or missed. The contact phase
     over the free flight of the same run is the figure least moved by a shared machine's
     drift."""
-    r = next((r for r in rows if "runs" in r and round(r["concentration_pct"], 2) == TARGET_C), None)
+    r = next((r for r in rows if "runs" in r and paper_c(r["concentration_pct"]) == TARGET_C), None)
     x = r["runs"].get("1") if r else None
     formed = r is not None and r["spinup_s_simulated"] >= 0.99 * TARGET_SPINUP_S  # to the nearest step
     reduced = r is None or r.get("domain") != "paper"  # the targets' case is the reduced one
