@@ -875,7 +875,8 @@ def main():
     ap.add_argument("--cases", default=str(REDUCED),
                     help="sweep file the measured cases come from (default the reduced sweep; the full sweep "
                          "cases/concentration_sweep.toml checks the domain-size assumption)")
-    ap.add_argument("--sweep", default=str(FULL), help="the full sweep to estimate")
+    ap.add_argument("--sweep", default=None,
+                    help=f"the full sweep to estimate (default {FULL.relative_to(ROOT)}; with --print-json, the saved run's)")
     ap.add_argument("--spinup-states", default=None, metavar="DIR",
                     help="save each spun-up state here, and load it instead of spinning up when it is there")
     ap.add_argument("--json", default=None)
@@ -891,10 +892,14 @@ def main():
         return
     if args.print_json:  # the table and the estimate again, from a saved --json
         saved = json.loads(Path(args.print_json).read_text())
-        for k in ("tau_ratio", "spinup", "steps", "cases", "sweep"):
+        for k in ("tau_ratio", "spinup", "steps", "cases"):
             key = {"spinup": "spinup_s"}.get(k, k)
             if key in saved:
                 setattr(args, k, saved[key])
+        args.sweep = args.sweep or saved.get("sweep") or str(FULL)  # a --sweep given wins
+        if not Path(args.sweep).is_file():
+            sys.exit(f"--print-json {args.print_json}: its sweep file {args.sweep} is not there (saved from another "
+                     f"checkout?): name one with --sweep, e.g. --sweep {FULL.relative_to(ROOT)}")
         rows = sorted(_with_domain(saved["concentrations"], args.cases), key=lambda r: r["concentration_pct"])
         print_table(rows, args)
         est = sweep_estimate(rows + _saved_rows(args.with_json), args.sweep)
@@ -902,6 +907,7 @@ def main():
         print_targets(rows, est)
         print(f"\n(saved {saved.get('date')}, command: {saved.get('command')})")
         return
+    args.sweep = args.sweep or str(FULL)
     import saltation
 
     t0 = time.perf_counter()

@@ -1,7 +1,8 @@
 """benchmarks/bench_dense.py's tools: --spinup-states (a saved spin-up comes back as it was
 saved, and a file made for another case, or not a saved spin-up at all, is refused by
-name), the count of touching pairs (the same as a direct count over all pairs), and the
-estimate's warning when it extrapolates below the measured concentrations."""
+name), the count of touching pairs (the same as a direct count over all pairs), the
+estimate's warning when it extrapolates below the measured concentrations, which
+measurement of a concentration it takes, and --print-json of a run saved elsewhere."""
 import sys
 from pathlib import Path
 from typing import NamedTuple
@@ -111,3 +112,23 @@ def test_a_paper_domain_measurement_replaces_the_reduced_one_of_the_same_concent
     assert by_c[1.03] == {(4.0, True, False)}
     assert by_c[3.94] == {(13.0, True, False)}
     assert by_c[0.04] == {(1.0, False, False)}
+
+
+def test_a_saved_run_from_another_checkout_names_its_missing_sweep_file_and_takes_sweep(bench, tmp_path, monkeypatch,
+                                                                                     capsys):
+    saved = tmp_path / "run.json"
+    saved.write_text('{"cases": "/gone/cases/concentration_sweep_reduced.toml", "sweep": '
+                     '"/gone/cases/concentration_sweep.toml", "tau_ratio": 1.79, "steps": 200, "concentrations": []}')
+    monkeypatch.setattr(sys, "argv", ["bench_dense.py", "--print-json", str(saved)])
+    with pytest.raises(SystemExit) as err:
+        bench.main()
+    assert "its sweep file /gone/cases/concentration_sweep.toml is not there" in str(err.value)
+    assert "--sweep cases/concentration_sweep.toml" in str(err.value)
+    sweep = Path(__file__).resolve().parents[1] / "cases" / "concentration_sweep.toml"
+    joined = tmp_path / "paper.json"  # one measured concentration, so that there is an estimate to print
+    joined.write_text('{"cases": "concentration_sweep.toml", "concentrations": '
+                      '[{"concentration_pct": 3.94, "runs": {"1": {"us_per_grain_step": 10.0}}}]}')
+    monkeypatch.setattr(sys, "argv", ["bench_dense.py", "--print-json", str(saved), "--with-json", str(joined),
+                                      "--sweep", str(sweep)])
+    bench.main()  # a --sweep given wins over the saved one
+    assert "Full sweep (concentration_sweep.toml: 24 cases" in capsys.readouterr().out
