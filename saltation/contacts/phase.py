@@ -1871,6 +1871,14 @@ def _lanes(threads, n_cand, ph):
     return threads if n_cand >= ph.parallel_members[0] and threads >= ph.parallel_members[1] else 1
 
 
+@njit(cache=True, no_cfunc_wrapper=True, inline="always")
+def _lane_start(q, m, lanes):
+    """The first of lane q's members when m members are cut into ``lanes`` contiguous
+    ranges (_substep_part runs them, _candidates_first orders each, and the drift's
+    members to widen are listed from there)."""
+    return np.int64(q) * m // lanes
+
+
 @njit(cache=True, no_cfunc_wrapper=True)
 def _candidates_first(new, mstart, gid, start, threads, ph):
     """``new`` (member in cell order → set index) with each block renumbered: its
@@ -1894,8 +1902,8 @@ def _candidates_first(new, mstart, gid, start, threads, ph):
             n_cand += start[gid[inv[t]]] <= 1.0
         lanes = _lanes(threads, n_cand, ph)
         for q in range(lanes):
-            t0 = lo + np.int64(q) * (hi - lo) // lanes
-            t1 = lo + (np.int64(q) + 1) * (hi - lo) // lanes
+            t0 = lo + _lane_start(q, hi - lo, lanes)
+            t1 = lo + _lane_start(q + 1, hi - lo, lanes)
             k = t0
             for first in (True, False):
                 for t in range(t0, t1):
@@ -2141,7 +2149,7 @@ KICK_DRIFT, FORCES, KICK, KICK_KICK_DRIFT = 0, 1, 2, 3
 
 
 @njit(cache=True, no_cfunc_wrapper=True, parallel=True)
-def _substep_part(part, cs, st, bc, model, s, dt, h, lo, hi, app, blk, lanes, woke, wide2):
+def _substep_part(part, cs, st, bc, model, s, dt, h, lo, hi, app, blk, lanes, per_lane, wide2):
     """One part of a sub-step of a large block (KICK_DRIFT, FORCES, KICK or
     KICK_KICK_DRIFT), its members cut into ``lanes`` contiguous ranges done in parallel.
     Every member's arithmetic is its own (_forces), so the result is that of one thread,
@@ -2149,28 +2157,29 @@ def _substep_part(part, cs, st, bc, model, s, dt, h, lo, hi, app, blk, lanes, wo
     (_quiet_until needs the members one after another; on two threads retiring them
     afterwards, one after another, measured slower, not faster). The members whose
     deviation reached ``wide2`` in the drift are widened after it, lane by lane, each in
-    member order (_kick_drift; their rows are read first by the forces)."""
+    member order (_kick_drift; their rows are read first by the forces). ``per_lane``:
+    scratch, each lane's count (grains woken by its forces, or members to widen)."""
     m = _block_size(cs, lo, hi, app)
     for q in prange(lanes):
-        t0 = np.int64(q) * m // lanes
-        t1 = (np.int64(q) + 1) * m // lanes
+        t0 = _lane_start(q, m, lanes)
+        t1 = _lane_start(q + 1, m, lanes)
         v = as_tuple(cs, SubstepSet)  # the hot loops read tuples (grains/refs.py)
         if part == KICK_DRIFT or part == KICK_KICK_DRIFT:
             # the flags as run-time values (part < 0: False), as in _run_block
-            woke[q] = _kick_drift(v, model, s, dt, h, lo, hi, app, t0, t1, part == KICK_KICK_DRIFT, part < 0, 0.0,
-                                  wide2)
+            per_lane[q] = _kick_drift(v, model, s, dt, h, lo, hi, app, t0, t1, part == KICK_KICK_DRIFT, part < 0,
+                                      0.0, wide2)
         elif part == FORCES:
-            woke[q] = _forces(v, as_tuple(st, GrainState), as_tuple(bc, BedContext), model, s, dt, h,
-                              lo, hi, app, blk, t0, t1, 0.0, part < 0)[0]
+            per_lane[q] = _forces(v, as_tuple(st, GrainState), as_tuple(bc, BedContext), model, s, dt, h,
+                                  lo, hi, app, blk, t0, t1, 0.0, part < 0)[0]
         else:
             _kick(v, model, h, lo, hi, app, t0, t1)
     if part == FORCES:
-        return woke[:lanes].sum()
+        return per_lane[:lanes].sum()
     if part == KICK_DRIFT or part == KICK_KICK_DRIFT:
         v = as_tuple(cs, SubstepSet)
         for q in range(lanes):
-            t0 = np.int64(q) * m // lanes
-            for i in range(woke[q]):
+            t0 = _lane_start(q, m, lanes)
+            for i in range(per_lane[q]):
                 _widen(v, v.go[t0 + i])
     return 0
 
@@ -2190,7 +2199,7 @@ def _run_block(cs, cand, c0, c1, lo, hi, blk, x0w, st, bc, model, cl, ph, dt, n_
     n_act = 0  # active members of the block
     done = 0
     woken = 0
-    woke = np.zeros(max(lanes, 1), np.int64)
+    per_lane = np.zeros(max(lanes, 1), np.int64)  # each lane's count (_substep_part)
     first = np.int64(0)  # not the literal 0: that would compile the kernels once more
     listed, scanned = first == 0, first != 0  # True and False, likewise not literals
     # the sub-step kernels read tuples (grains/refs.as_tuple); the set's view is made
@@ -2218,9 +2227,10 @@ def _run_block(cs, cand, c0, c1, lo, hi, blk, x0w, st, bc, model, cl, ph, dt, n_
         # the previous sub-step's second half kick is done in this pass (from k = 1)
         if lanes > 1:
             part = KICK_KICK_DRIFT if k > 0 else KICK_DRIFT
-            _substep_part(np.int64(part), cs, st, bc, model, s_next, dt, h, lo, hi, app, blk, lanes, woke, wide2)
+            _substep_part(np.int64(part), cs, st, bc, model, s_next, dt, h, lo, hi, app, blk, lanes, per_lane,
+                          wide2)
             n_woke = _substep_part(np.int64(FORCES), cs, st, bc, model, s_next, dt, h, lo, hi, app, blk,
-                                   lanes, woke, wide2)
+                                   lanes, per_lane, wide2)
         else:
             m = _block_size(v, lo, hi, app)
             n_go = _kick_drift(v, model, s_next, dt, h, lo, hi, app, first, m, k > 0, listed, backoff, wide2)
@@ -2234,7 +2244,7 @@ def _run_block(cs, cand, c0, c1, lo, hi, blk, x0w, st, bc, model, cl, ph, dt, n_
             v = as_tuple(cs, SubstepSet)
     # the last sub-step's second half kick
     if lanes > 1:
-        _substep_part(np.int64(KICK), cs, st, bc, model, 1.0, dt, h, lo, hi, app, blk, lanes, woke, wide2)
+        _substep_part(np.int64(KICK), cs, st, bc, model, 1.0, dt, h, lo, hi, app, blk, lanes, per_lane, wide2)
     else:
         _kick(v, model, h, lo, hi, app, first, _block_size(v, lo, hi, app))
     return cs, done, woken
