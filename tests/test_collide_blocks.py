@@ -246,14 +246,14 @@ def test_near_entries_go_first_in_row_order_and_remember_their_list_entries():
     from saltation.contacts.phase import _near_first
     rng = np.random.default_rng(4)
     r0, r1, size = 5, 28, 40
-    nbr = rng.integers(0, 1000, size)
-    image = rng.normal(size=(size, 3))
+    nbr = rng.integers(0, 1000, size).astype(np.int32)  # the set's dtypes (SubstepSet)
+    image = rng.integers(-1, 2, (size, 3)).astype(np.int8)
     touch = rng.integers(0, 2, size).astype(np.uint8)
     shear = rng.normal(size=(size, 3))
     is_near = np.zeros(r1 - r0, bool)
     is_near[rng.choice(r1 - r0, 9, replace=False)] = True
     order = np.concatenate([np.flatnonzero(is_near), np.flatnonzero(~is_near)]) + r0
-    nx = np.arange(size)
+    nx = np.arange(size, dtype=np.int32)
     nx[r0:r0 + 9] = order[:9]
     nx[r0 + 9:r1] = order[9:][::-1]
     before = [a.copy() for a in (nbr, image, touch, shear)]

@@ -391,7 +391,7 @@ from ..io.progress import wall_clock
 from ..physics.contact_law import lever_torque, sphere_contact_velocity, spring_dashpot
 from ..physics.history import history_mark_impact
 from ..physics.rng import uniform2
-from .cells import axis_span, build_cells, image_shift, min_image, stable_argsort, stencil_cells
+from .cells import axis_span, build_cells, image_count, min_image, stable_argsort, stencil_cells
 from .pairs import (
     LEVER_RADIUS,
     ContactList,
@@ -550,7 +550,7 @@ class SubstepSet(NamedTuple):
     queue: np.ndarray  # (C,) int64 scratch: members woken in a round
     rs: np.ndarray  # (C,) int64 first flat entry of the row
     rc: np.ndarray  # (C,) int64 neighbours in the row
-    nbr: np.ndarray  # (R,) int64 neighbour (member index)
+    nbr: np.ndarray  # (R,) int32 neighbour (member index)
     shear: np.ndarray  # (R, 3) tangential spring
     touch: np.ndarray  # (R,) uint8
     collisions: np.ndarray  # (C,) int64 (the ContactList's counters, copied in and out)
@@ -573,14 +573,15 @@ class SubstepSet(NamedTuple):
     jump_n0: np.ndarray  # (C,) int64 the grain's jump_buf_n and jump_count when its row was
     jump_c0: np.ndarray  # (C,) int64 copied in (restored if the phase is redone unblocked)
     nn: np.ndarray  # (C,) int64 near entries of the row (free-flight paths within d + 2 NEAR_SLACK): its first nn
-    nx: np.ndarray  # (R,) int64 where each row entry was set (_set_row): its list entry is nx − rs
+    nx: np.ndarray  # (R,) int32 where each row entry was set (_set_row): its list entry is nx − rs
     at: np.ndarray  # (C, 3) every member's position at the sub-step being evaluated (_at)
-    image: np.ndarray  # (R, 3) periodic-image shift of row entry k for the step (_set_row)
+    image: np.ndarray  # (R, 3) int8 row entry k's periodic image for the step, in box lengths (_set_row)
     retry: np.ndarray  # (C,) step fraction from which an active member may try to retire; a retired one is forced again
     flagged: np.ndarray  # (C,) int64 scratch: members that touched one not active, in _forces' order
     go: np.ndarray  # (C,) int64 scratch: the active members of the sub-step, in member order (_kick_drift)
     retired: np.ndarray  # (1,) int64 grain-sub-steps of the block's members while retired
     widened: np.ndarray  # (1,) int64 members whose deviation reached the near filter's slack (_widen)
+    period: np.ndarray  # (3,) the box length of each periodic axis, 0.0 on an open one: image × period is the shift
 
 
 # The set travels between kernels as a StructRef (grains/refs.py), made and grown only in
@@ -599,14 +600,14 @@ def _make_set(c, r):
         np.zeros(1, np.int64), np.zeros(1, np.int64), np.empty(c, np.int64),
         np.empty((c, 18)), np.empty((c, 9)), np.empty((c, 9)), np.empty((c, 6)), np.empty(c), np.empty(c),
         np.empty(c, np.uint8), np.empty(c, np.uint8), np.empty(c, np.uint8), np.empty(c, np.uint8),
-        np.empty(c, np.int64), np.empty(c, np.int64), np.empty(c, np.int64), np.empty(r, np.int64),
+        np.empty(c, np.int64), np.empty(c, np.int64), np.empty(c, np.int64), np.empty(r, np.int32),
         np.empty((r, 3)), np.empty(r, np.uint8), np.empty(c, np.int64), np.empty(c),
         np.empty(c, np.int64), np.empty(c, np.int64), np.empty(c), np.empty(c), np.empty((c, BED_SLOTS), np.int64),
         np.empty((c, BED_SLOTS, 3)), np.empty((c, BED_SLOTS, 3)), np.empty(c, np.uint8), np.empty(c, np.int64),
         np.empty((c, 3)), np.empty(c, np.int64), np.empty(c), np.empty(c), np.empty(c), np.empty(c, np.int64),
-        np.empty(c, np.int64), np.empty(c, np.int64), np.empty(c, np.int64), np.empty(r, np.int64),
-        np.empty((c, 3)), np.empty((r, 3)), np.empty(c), np.empty(c, np.int64), np.empty(c, np.int64), np.zeros(1, np.int64),
-        np.zeros(1, np.int64),
+        np.empty(c, np.int64), np.empty(c, np.int64), np.empty(c, np.int64), np.empty(r, np.int32),
+        np.empty((c, 3)), np.empty((r, 3), np.int8), np.empty(c), np.empty(c, np.int64), np.empty(c, np.int64),
+        np.zeros(1, np.int64), np.zeros(1, np.int64), np.zeros(3),
     )
 
 
@@ -653,7 +654,7 @@ def _grow(cs, c, r):
         _resized(cs.jump_x0, c), _resized(cs.jump_ymax, c), _resized(cs.block, c), _resized(cs.jump_n0, c),
         _resized(cs.jump_c0, c), _resized(cs.nn, c), _resized(cs.nx, r), _resized(cs.at, c),
         _resized(cs.image, r), _resized(cs.retry, c), _resized(cs.flagged, c), _resized(cs.go, c), cs.retired,
-        cs.widened,
+        cs.widened, cs.period,
     )
 
 
@@ -767,7 +768,8 @@ def _grain_force(a, cs, model, s, dt, h, update, blk):
     damp_t = meff * model.gamma_t
     at_radius = model.lever == LEVER_RADIUS
     cur, active, nbr, shear, touch, block, at = cs.cur, cs.active, cs.nbr, cs.shear, cs.touch, cs.block, cs.at
-    image = cs.image
+    image, period = cs.image, cs.period
+    px, py, pz = period[0], period[1], period[2]
     fx = 0.0
     fy = 0.0
     fz = 0.0
@@ -786,10 +788,10 @@ def _grain_force(a, cs, model, s, dt, h, update, blk):
         rsq = d2
         delx = dely = delz = 0.0
         if block[b] == blk:
-            # min_image with the pair's shift of the step (the same bits: cells.image_shift)
-            delx = (xi - at[b, 0]) - image[k, 0]
-            dely = (yi - at[b, 1]) - image[k, 1]
-            delz = (zi - at[b, 2]) - image[k, 2]
+            # min_image with the pair's shift of the step (the same bits: cells.image_count)
+            delx = (xi - at[b, 0]) - px * image[k, 0]
+            dely = (yi - at[b, 1]) - py * image[k, 1]
+            delz = (zi - at[b, 2]) - pz * image[k, 2]
             rsq = delx * delx + dely * dely + delz * delz
         if rsq >= d2:
             if touch[k] != 0:
@@ -1379,7 +1381,7 @@ def _quiet_until(cs, a, s, dt, h, d, blk):
     least = QUIET_MIN * h / span
     if first <= least:
         return 0.0
-    active, nbr, block, image = cs.active, cs.nbr, cs.block, cs.image
+    active, nbr, block, image, period = cs.active, cs.nbr, cs.block, cs.image, cs.period
     r0 = cs.rs[a]
     for k in range(r0, r0 + cs.nn[a]):
         b = nbr[k]
@@ -1389,7 +1391,8 @@ def _quiet_until(cs, a, s, dt, h, d, blk):
         for c in range(3):  # _chord of the two courses
             xa, ua, xa1, ua1 = _rest_of_path(cs, a, s, dt, c)
             xb, ub, xb1, ub1 = _rest_of_path(cs, b, s, dt, c)
-            r2, rd, dd, w0, w1 = _chord_add(r2, rd, dd, w0, w1, (xa - xb) - image[k, c], (xa1 - xa) - (xb1 - xb),
+            r2, rd, dd, w0, w1 = _chord_add(r2, rd, dd, w0, w1, (xa - xb) - period[c] * image[k, c],
+                                            (xa1 - xa) - (xb1 - xb),
                                             ua - ub, ua1 - ub1, span)
         first = min(first, _chord_touch(r2, rd, dd, _bulge(w0, w1), d))
         if first <= least:
@@ -1560,7 +1563,7 @@ def _set_row(cs, a, st, cl, bc, ph):
         b = ph.loc[cl.nbr[g, k]]
         cs.nbr[r0 + k] = b
         for c in range(3):
-            cs.image[r0 + k, c] = image_shift(cs.path[a, c] - cs.path[b, c], box[c], per[c])
+            cs.image[r0 + k, c] = image_count(cs.path[a, c] - cs.path[b, c], box[c], per[c])
         cs.nx[r0 + k] = r0 + k
         cs.touch[r0 + k] = cl.touch[g, k]
         for c in range(3):
@@ -1837,6 +1840,8 @@ def _gather(x0w, st, cl, bc, ph, dt, d, blocked, forced, cs, filtered, threads):
     # room for some woken grains' rows and new neighbours (_give_row grows it if needed)
     cs = _grow(cs, members + members // 8 + 16, rows + rows // 8 + 8 * nbr.shape[1])
     cs.n_rows[0] = 0
+    for c in range(3):
+        cs.period[c] = cl.grid.box[c] if cl.grid.periodic[c] else 0.0
     for p in range(members):
         loc[gid[p]] = new[p]
         cs.gid[new[p]] = gid[p]
