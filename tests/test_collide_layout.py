@@ -88,8 +88,7 @@ def test_the_compact_set_grows_without_losing_its_contents():
     cs = substep_view(ref)  # the set's arrays, seen from Python
     cs.n[0], cs.n_rows[0] = 3, 5
     cs.gid[:3] = [7, 2, 9]
-    cs.path[:3] = np.arange(36.0).reshape(3, 12)
-    cs.spin_ends[:3] = np.arange(18.0).reshape(3, 6)
+    cs.path[:3] = np.arange(54.0).reshape(3, 18)
     cs.nbr[:5] = [1, 2, 0, 2, 0]
     cs.shear[:5] = np.arange(15.0).reshape(5, 3)
     cs.slot_c[:3] = np.arange(36.0).reshape(3, 4, 3)
@@ -99,8 +98,6 @@ def test_the_compact_set_grows_without_losing_its_contents():
     assert big.n[0] == 3 and big.n_rows[0] == 5
     np.testing.assert_array_equal(big.gid[:3], [7, 2, 9])
     np.testing.assert_array_equal(big.path[:3], cs.path[:3])
-    np.testing.assert_array_equal(big.spin_ends[:3], cs.spin_ends[:3])
-    np.testing.assert_array_equal(big.period, cs.period)
     np.testing.assert_array_equal(big.nbr[:5], cs.nbr[:5])
     np.testing.assert_array_equal(big.shear[:5], cs.shear[:5])
     np.testing.assert_array_equal(big.slot_c[:3], cs.slot_c[:3])
@@ -170,10 +167,8 @@ def test_a_retired_member_reads_as_if_it_were_active():
     bits as the cur _set_path gives an active one with the same path and deviation."""
     rng = np.random.default_rng(5)
     cs = substep_view(_make_set(2, 1))
-    cs.path[0] = rng.normal(size=12)
+    cs.path[0] = rng.normal(size=18)
     cs.path[1] = cs.path[0]
-    cs.spin_ends[0] = rng.normal(size=6)
-    cs.spin_ends[1] = cs.spin_ends[0]
     cs.dev[0] = 1e-3 * rng.normal(size=9)
     cs.dev[1] = cs.dev[0]
     cs.active[:] = (ACTIVE, RETIRED)

@@ -144,8 +144,8 @@ sub-step made the phase memory-bound, its cost per grain-sub-step growing with N
 misses: 119 → 534 ns for the kick/drift alone from N = 5 k to 100 k). So each phase first
 gathers the candidates (start ≤ 1) and their list neighbours into a ``SubstepSet``:
 compact arrays numbered in the list's cell order (spatial neighbours sit close in
-memory), with the free-flight path of every member (x₀, u₀, x₁, u₁ in one 12-wide row,
-which is all that placing a member on its path reads; ϖ₀, ϖ₁ beside it), and for the candidates their neighbour rows (flat, remapped to member
+memory), with the free-flight path of every member (x₀, u₀, ϖ₀, x₁, u₁, ϖ₁ in one
+18-wide row), and for the candidates their neighbour rows (flat, remapped to member
 indices, in the list's order), tangential springs, bed-contact slots, counters and jump
 state. All sub-steps run on these; the changed state is scattered back once at the end
 of the phase. A woken grain that was only a neighbour gets its row then, its own
@@ -537,7 +537,7 @@ class SubstepSet(NamedTuple):
     n: np.ndarray  # (1,) int64 members in use
     n_rows: np.ndarray  # (1,) int64 flat row entries in use
     gid: np.ndarray  # (C,) int64
-    path: np.ndarray  # (C, 12) x₀, u₀, x₁, u₁ of the free flight (placing a member reads only these)
+    path: np.ndarray  # (C, 18) x₀, u₀, ϖ₀, x₁, u₁, ϖ₁ of the free flight
     cur: np.ndarray  # (C, 9) P, V, W at the current sub-step (active members)
     dev: np.ndarray  # (C, 9) deviations δx, δu, δϖ from the free-flight path
     ft: np.ndarray  # (C, 6) contact force and torque at the last evaluation
@@ -582,7 +582,6 @@ class SubstepSet(NamedTuple):
     retired: np.ndarray  # (1,) int64 grain-sub-steps of the block's members while retired
     widened: np.ndarray  # (1,) int64 members whose deviation reached the near filter's slack (_widen)
     period: np.ndarray  # (3,) the box length of each periodic axis, 0.0 on an open one: image × period is the shift
-    spin_ends: np.ndarray  # (C, 6) ϖ₀, ϖ₁ of the free flight
 
 
 # The set travels between kernels as a StructRef (grains/refs.py), made and grown only in
@@ -599,7 +598,7 @@ def _make_set(c, r):
     r = max(r, 1)
     return SubstepSetRef(
         np.zeros(1, np.int64), np.zeros(1, np.int64), np.empty(c, np.int64),
-        np.empty((c, 12)), np.empty((c, 9)), np.empty((c, 9)), np.empty((c, 6)), np.empty(c), np.empty(c),
+        np.empty((c, 18)), np.empty((c, 9)), np.empty((c, 9)), np.empty((c, 6)), np.empty(c), np.empty(c),
         np.empty(c, np.uint8), np.empty(c, np.uint8), np.empty(c, np.uint8), np.empty(c, np.uint8),
         np.empty(c, np.int64), np.empty(c, np.int64), np.empty(c, np.int64), np.empty(r, np.int32),
         np.empty((r, 3)), np.empty(r, np.uint8), np.empty(c, np.int64), np.empty(c),
@@ -608,7 +607,7 @@ def _make_set(c, r):
         np.empty((c, 3)), np.empty(c, np.int64), np.empty(c), np.empty(c), np.empty(c), np.empty(c, np.int64),
         np.empty(c, np.int64), np.empty(c, np.int64), np.empty(c, np.int64), np.empty(r, np.int32),
         np.empty((c, 3)), np.empty((r, 3), np.int8), np.empty(c), np.empty(c, np.int64), np.empty(c, np.int64),
-        np.zeros(1, np.int64), np.zeros(1, np.int64), np.zeros(3), np.empty((c, 6)),
+        np.zeros(1, np.int64), np.zeros(1, np.int64), np.zeros(3),
     )
 
 
@@ -655,7 +654,7 @@ def _grow(cs, c, r):
         _resized(cs.jump_x0, c), _resized(cs.jump_ymax, c), _resized(cs.block, c), _resized(cs.jump_n0, c),
         _resized(cs.jump_c0, c), _resized(cs.nn, c), _resized(cs.nx, r), _resized(cs.at, c),
         _resized(cs.image, r), _resized(cs.retry, c), _resized(cs.flagged, c), _resized(cs.go, c), cs.retired,
-        cs.widened, cs.period, _resized(cs.spin_ends, c),
+        cs.widened, cs.period,
     )
 
 
@@ -676,8 +675,8 @@ def _hermite(x0, x1, v0, v1, s, dt):
 @njit(cache=True, no_cfunc_wrapper=True, inline="always", error_model="numpy", _nrt=False)
 def _on_path(path, a, c, s, dt):
     """Member a's free-flight position and velocity along axis c at s (_hermite of its
-    path row: x₀, u₀, x₁, u₁)."""
-    return _hermite(path[a, c], path[a, 6 + c], path[a, 3 + c], path[a, 9 + c], s, dt)
+    path row: x₀, u₀, ϖ₀, x₁, u₁, ϖ₁)."""
+    return _hermite(path[a, c], path[a, 9 + c], path[a, 3 + c], path[a, 12 + c], s, dt)
 
 
 @njit(cache=True, no_cfunc_wrapper=True, inline="always", error_model="numpy", _nrt=False)
@@ -708,8 +707,8 @@ def _velocity_of(cs, a, s, dt, c):
 @njit(cache=True, no_cfunc_wrapper=True, inline="always", error_model="numpy", _nrt=False)
 def _spin_of(cs, a, s, c):
     """cur W of member a along axis c at s (spin linear between the step's ends)."""
-    w = cs.spin_ends
-    return (1.0 - s) * w[a, c] + s * w[a, 3 + c] + cs.dev[a, 6 + c]
+    p = cs.path
+    return (1.0 - s) * p[a, 6 + c] + s * p[a, 15 + c] + cs.dev[a, 6 + c]
 
 
 @njit(cache=True, no_cfunc_wrapper=True, inline="always", error_model="numpy", _nrt=False)
@@ -734,14 +733,14 @@ def _state_of(cs, b, s, dt):
         c = cs.cur
         return (c[b, 0], c[b, 1], c[b, 2], _velocity_of(cs, b, s, dt, 0), _velocity_of(cs, b, s, dt, 1),
                 _velocity_of(cs, b, s, dt, 2), _spin_of(cs, b, s, 0), _spin_of(cs, b, s, 1), _spin_of(cs, b, s, 2))
-    p, w = cs.path, cs.spin_ends
+    p = cs.path
     x0, v0 = _on_path(p, b, 0, s, dt)
     x1, v1 = _on_path(p, b, 1, s, dt)
     x2, v2 = _on_path(p, b, 2, s, dt)
     return (x0, x1, x2, v0, v1, v2,
-            (1.0 - s) * w[b, 0] + s * w[b, 3],
-            (1.0 - s) * w[b, 1] + s * w[b, 4],
-            (1.0 - s) * w[b, 2] + s * w[b, 5])
+            (1.0 - s) * p[b, 6] + s * p[b, 15],
+            (1.0 - s) * p[b, 7] + s * p[b, 16],
+            (1.0 - s) * p[b, 8] + s * p[b, 17])
 
 
 # ----------------------------------------------------------------------------- forces
@@ -1352,10 +1351,10 @@ def _rest_of_path(cs, b, s, dt, c):
     p = cs.path
     if cs.active[b] == 0:
         x, u = _on_path(p, b, c, s, dt)
-        return x, u, p[b, 6 + c], p[b, 9 + c]
+        return x, u, p[b, 9 + c], p[b, 12 + c]
     du = cs.dev[b, 3 + c]
     u = cs.cur[b, 3 + c] if cs.active[b] == ACTIVE else _velocity_of(cs, b, s, dt, c)  # retired: _set_place
-    return cs.cur[b, c], u, p[b, 6 + c] + cs.dev[b, c] + du * ((1.0 - s) * dt), p[b, 9 + c] + du
+    return cs.cur[b, c], u, p[b, 9 + c] + cs.dev[b, c] + du * ((1.0 - s) * dt), p[b, 12 + c] + du
 
 
 @njit(cache=True, no_cfunc_wrapper=True, error_model="numpy", _nrt=False)
@@ -1532,10 +1531,10 @@ def _set_member(cs, a, g, x0w, pos, vel, spin, start, blk):
     for c in range(3):
         cs.path[a, c] = x0w[g, c]
         cs.path[a, 3 + c] = x0w[g, 3 + c]
-        cs.path[a, 6 + c] = pos[g, c]
-        cs.path[a, 9 + c] = vel[g, c]
-        cs.spin_ends[a, c] = x0w[g, 6 + c]
-        cs.spin_ends[a, 3 + c] = spin[g, c]
+        cs.path[a, 6 + c] = x0w[g, 6 + c]
+        cs.path[a, 9 + c] = pos[g, c]
+        cs.path[a, 12 + c] = vel[g, c]
+        cs.path[a, 15 + c] = spin[g, c]
     cs.start[a] = start[g]
     cs.active[a] = 0
     cs.wake[a] = 0
@@ -1668,8 +1667,8 @@ def _chord_touch(r2, rd, dd, bulge, d):
 @njit(cache=True, no_cfunc_wrapper=True, inline="always")
 def _member_gap(path, a, b, box, per, dt):
     """_path_gap of members a and b of a SubstepSet (``path``: its free-flight rows)."""
-    return _path_gap(path[a, 0:3], path[a, 6:9], path[a, 3:6], path[a, 9:12], path[b, 0:3], path[b, 6:9],
-                     path[b, 3:6], path[b, 9:12], box, per, dt)
+    return _path_gap(path[a, 0:3], path[a, 9:12], path[a, 3:6], path[a, 12:15], path[b, 0:3], path[b, 9:12],
+                     path[b, 3:6], path[b, 12:15], box, per, dt)
 
 
 @njit(cache=True, no_cfunc_wrapper=True, inline="always")
