@@ -260,9 +260,10 @@ domain at 6.99 / 6.59 against 7.05 / 6.77 (alternated, two rounds): the extra co
 grain-sub-step at full size is not TLB misses. Fewer bytes per row entry (``nbr`` and
 ``nx`` int32, ``image`` one byte per axis: the force loop streams 8 instead of 33 bytes
 per near entry) took the sub-steps there from 8.16 to 7.77 µs per grain-step on average
-(seven alternated pairs on an AMD EPYC VM, 2026-12-07, four with a second full-size run beside them: −11 % to +7 %; the reduced case
-unchanged); splitting the path row so that placing a member reads 96 of its 144 bytes
-gave nothing (7.46 / 8.42 against 6.69 / 8.33) and was not kept.
+(seven alternated pairs on an AMD EPYC VM, 2026-12-07, four of them with a second
+full-size run beside them: −11 % to +7 %; the reduced case unchanged); splitting the path
+row so that placing a member reads 96 of its 144 bytes gave nothing (7.46 / 8.42 against
+6.69 / 8.33) and was not kept.
 
 Near pairs. A grain's row holds every list neighbour (cutoff d + skin; in the dense layer
 the skin is widened for the fast grains above it: ~21 entries per engaged grain at 3.94 %),
