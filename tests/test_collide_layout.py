@@ -214,3 +214,21 @@ def test_each_block_and_lane_is_numbered_candidates_first():
             np.testing.assert_array_equal(got[want], np.arange(lo, hi))
         if threads == 2:  # the test means something: lane 0 holds one candidate of 4
             assert cand[new < 3].sum() == 1
+
+
+def test_a_pair_many_box_lengths_apart_unwrapped_touches_as_in_the_box():
+    """Positions along a periodic axis are unwrapped (a saltating grain laps the box a few
+    hundred times in 200 s more than one resting on the bed): a pair's periodic image for
+    the step (SubstepSet.image, in box lengths) must hold that many laps. Grain 0 is 300
+    box lengths downstream of where it is in the reference run; grain 1 runs into it. The
+    same collision, the same velocities after it (to the rounding of the larger x)."""
+    pos = np.array([[5.0, 3.0, 5.0], [5.0 - 1.05, 3.0, 5.0]])
+    vel = np.array([[0.0, 0.0, 0.0], [12.0, 0.0, 0.0]])
+    ref = run_contact_phase(pos.copy(), vel.copy(), steps=2)
+    lapped = pos.copy()
+    lapped[0, 0] += 300 * 12.0  # the helper's box is 12 d long in x
+    got = run_contact_phase(lapped, vel.copy(), steps=2)
+    assert ref[1].collisions.sum() == 2  # both grains count the one collision
+    assert got[1].collisions.sum() == ref[1].collisions.sum()
+    np.testing.assert_allclose(got[0].vel, ref[0].vel, rtol=0, atol=1e-9)
+    assert abs(got[0].vel[1, 0] - 12.0) > 1.0  # the collision did change grain 1's velocity

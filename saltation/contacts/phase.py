@@ -257,9 +257,10 @@ change stood out of this machine's noise. Transparent huge pages for the compile
 allocations (glibc's ``GLIBC_TUNABLES=glibc.malloc.hugetlb=1``; 1.9 GB of huge pages
 instead of 0.55) left the contact phase over the free flight at 3.94 % on the paper's
 domain at 6.99 / 6.59 against 7.05 / 6.77 (alternated, two rounds): the extra cost per
-grain-sub-step at full size is not TLB misses. Fewer bytes per row entry (``nbr`` and
-``nx`` int32, ``image`` one byte per axis: the force loop streams 8 instead of 33 bytes
-per near entry) took the sub-steps there from 8.16 to 7.77 µs per grain-step on average
+grain-sub-step at full size is not TLB misses. Fewer bytes per row entry (``nbr``, ``nx``
+and ``image`` int32: the force loop streams 17 instead of 33 bytes per near entry; it was
+measured with ``image`` in one byte per axis, 8 bytes, which overflowed: x is unwrapped, so
+a pair's image counts the laps one grain made more than the other, hundreds in a 200 s run) took the sub-steps there from 8.16 to 7.77 µs per grain-step on average
 (seven alternated pairs on an AMD EPYC VM, 2026-12-07, four of them with a second
 full-size run beside them: −11 % to +7 %; the reduced case unchanged); splitting the path
 row so that placing a member reads 96 of its 144 bytes gave nothing (7.46 / 8.42 against
@@ -581,7 +582,7 @@ class SubstepSet(NamedTuple):
     nn: np.ndarray  # (C,) int64 near entries of the row (free-flight paths within d + 2 NEAR_SLACK): its first nn
     nx: np.ndarray  # (R,) int32 where each row entry was set (_set_row): its list entry is nx − rs
     at: np.ndarray  # (C, 3) every member's position at the sub-step being evaluated (_at)
-    image: np.ndarray  # (R, 3) int8 row entry k's periodic image for the step, in box lengths (_set_row)
+    image: np.ndarray  # (R, 3) int32 row entry k's periodic image for the step, in box lengths (_set_row; x is unwrapped: laps)
     retry: np.ndarray  # (C,) step fraction from which an active member may try to retire; a retired one is forced again
     flagged: np.ndarray  # (C,) int64 scratch: members that touched one not active, in _forces' order
     go: np.ndarray  # (C,) int64 scratch: the active members of the sub-step, in member order (_kick_drift)
@@ -612,7 +613,7 @@ def _make_set(c, r):
         np.empty((c, BED_SLOTS, 3)), np.empty((c, BED_SLOTS, 3)), np.empty(c, np.uint8), np.empty(c, np.int64),
         np.empty((c, 3)), np.empty(c, np.int64), np.empty(c), np.empty(c), np.empty(c), np.empty(c, np.int64),
         np.empty(c, np.int64), np.empty(c, np.int64), np.empty(c, np.int64), np.empty(r, np.int32),
-        np.empty((c, 3)), np.empty((r, 3), np.int8), np.empty(c), np.empty(c, np.int64), np.empty(c, np.int64),
+        np.empty((c, 3)), np.empty((r, 3), np.int32), np.empty(c), np.empty(c, np.int64), np.empty(c, np.int64),
         np.zeros(1, np.int64), np.zeros(1, np.int64), np.zeros(3),
     )
 
