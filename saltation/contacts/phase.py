@@ -258,13 +258,13 @@ allocations (glibc's ``GLIBC_TUNABLES=glibc.malloc.hugetlb=1``; 1.9 GB of huge p
 instead of 0.55) left the contact phase over the free flight at 3.94 % on the paper's
 domain at 6.99 / 6.59 against 7.05 / 6.77 (alternated, two rounds): the extra cost per
 grain-sub-step at full size is not TLB misses. Fewer bytes per row entry (``nbr``, ``nx``
-and ``image`` int32: the force loop streams 17 instead of 33 bytes per near entry; it was
-measured with ``image`` in one byte per axis, 8 bytes, which overflowed: x is unwrapped, so
-a pair's image counts the laps one grain made more than the other, hundreds in a 200 s run) took the sub-steps there from 8.16 to 7.77 µs per grain-step on average
-(seven alternated pairs on an AMD EPYC VM, 2026-12-07, four of them with a second
-full-size run beside them: −11 % to +7 %; the reduced case unchanged); splitting the path
-row so that placing a member reads 96 of its 144 bytes gave nothing (7.46 / 8.42 against
-6.69 / 8.33) and was not kept.
+and ``image`` int32: the force loop streams 17 instead of 33 bytes per near entry) gave
+no gain there: 7.34 / 8.71 µs per grain-step of sub-steps against 7.31 / 7.77 (two pairs
+alternated, AMD EPYC VM, 2026-12-07). With ``image`` in one byte per axis (8 bytes; it
+overflowed: x is unwrapped, so a pair's image counts the laps one grain made more than the
+other, hundreds in a 200 s run) seven pairs gave 8.16 → 7.77 on average (−11 % to +7 %;
+the reduced case unchanged). Splitting the path row so that placing a member reads 96 of
+its 144 bytes gave nothing (7.46 / 8.42 against 6.69 / 8.33) and was not kept.
 
 Near pairs. A grain's row holds every list neighbour (cutoff d + skin; in the dense layer
 the skin is widened for the fast grains above it: ~21 entries per engaged grain at 3.94 %),
