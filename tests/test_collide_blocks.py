@@ -247,7 +247,7 @@ def test_near_entries_go_first_in_row_order_and_remember_their_list_entries():
     rng = np.random.default_rng(4)
     r0, r1, size = 5, 28, 40
     nbr = rng.integers(0, 1000, size).astype(np.int32)  # the set's dtypes (SubstepSet)
-    image = rng.integers(-300, 301, (size, 3)).astype(np.int32)
+    image = rng.normal(size=(size, 3))
     touch = rng.integers(0, 2, size).astype(np.uint8)
     shear = rng.normal(size=(size, 3))
     is_near = np.zeros(r1 - r0, bool)

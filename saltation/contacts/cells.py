@@ -365,17 +365,8 @@ def image_shift(dx, length, periodic):
     had two divisions per pair: −14 % of its time at 3.94 % (the list search already
     multiplied, with a copy of this that is now gone). np.floor: no round trip through
     an integer."""
-    return length * image_count(dx, length, periodic)
-
-
-@njit(cache=True, no_cfunc_wrapper=True, inline="always")
-def image_count(dx, length, periodic):
-    """image_shift in box lengths: a whole number (as a float; 0.0 on an open axis), so
-    length × it is image_shift's value bit for bit. The contact phase stores it as an int32
-    (4 bytes instead of the shift's 8; not fewer: positions along a periodic axis are
-    unwrapped, so it counts the laps one grain made more than the other)."""
     if periodic:
-        return np.floor(dx * (1.0 / length) + 0.5)
+        return length * np.floor(dx * (1.0 / length) + 0.5)
     return 0.0
 
 

@@ -257,14 +257,15 @@ change stood out of this machine's noise. Transparent huge pages for the compile
 allocations (glibc's ``GLIBC_TUNABLES=glibc.malloc.hugetlb=1``; 1.9 GB of huge pages
 instead of 0.55) left the contact phase over the free flight at 3.94 % on the paper's
 domain at 6.99 / 6.59 against 7.05 / 6.77 (alternated, two rounds): the extra cost per
-grain-sub-step at full size is not TLB misses. Fewer bytes per row entry (``nbr``, ``nx``
-and ``image`` int32: the force loop streams 17 instead of 33 bytes per near entry) gave
-no gain there: 7.34 / 8.71 µs per grain-step of sub-steps against 7.31 / 7.77 (two pairs
-alternated, AMD EPYC VM, 2026-12-07). With ``image`` in one byte per axis (8 bytes; it
-overflowed: x is unwrapped, so a pair's image counts the laps one grain made more than the
-other, hundreds in a 200 s run) seven pairs gave 8.16 → 7.77 on average (−11 % to +7 %;
-the reduced case unchanged). Splitting the path row so that placing a member reads 96 of
-its 144 bytes gave nothing (7.46 / 8.42 against 6.69 / 8.33) and was not kept.
+grain-sub-step at full size is not TLB misses. Fewer bytes per row entry gave no gain
+there either (AMD EPYC VM, 2026-12-07, alternated with the code before): the periodic
+image as a whole number of box lengths (int32, times the box length where it is used) with
+``nbr`` and ``nx`` int32, 7.34 / 8.71 µs per grain-step of sub-steps against 7.31 / 7.77;
+in one byte per axis (which overflows: x is unwrapped, so a pair's image counts the laps
+one grain made more than the other, hundreds in a 200 s run) 8.16 → 7.77 on average over
+seven pairs (−11 % to +7 %). ``nbr`` and ``nx`` stayed int32; the image is kept as its
+shift, with nothing derived to keep in step with the grid. Splitting the path row so that
+placing a member reads 96 of its 144 bytes gave nothing (7.46 / 8.42 against 6.69 / 8.33).
 
 Near pairs. A grain's row holds every list neighbour (cutoff d + skin; in the dense layer
 the skin is widened for the fast grains above it: ~21 entries per engaged grain at 3.94 %),
@@ -398,7 +399,7 @@ from ..io.progress import wall_clock
 from ..physics.contact_law import lever_torque, sphere_contact_velocity, spring_dashpot
 from ..physics.history import history_mark_impact
 from ..physics.rng import uniform2
-from .cells import axis_span, build_cells, image_count, min_image, stable_argsort, stencil_cells
+from .cells import axis_span, build_cells, image_shift, min_image, stable_argsort, stencil_cells
 from .pairs import (
     LEVER_RADIUS,
     ContactList,
@@ -582,13 +583,12 @@ class SubstepSet(NamedTuple):
     nn: np.ndarray  # (C,) int64 near entries of the row (free-flight paths within d + 2 NEAR_SLACK): its first nn
     nx: np.ndarray  # (R,) int32 where each row entry was set (_set_row): its list entry is nx − rs
     at: np.ndarray  # (C, 3) every member's position at the sub-step being evaluated (_at)
-    image: np.ndarray  # (R, 3) int32 row entry k's periodic image for the step, in box lengths (_set_row; x is unwrapped: laps)
+    image: np.ndarray  # (R, 3) periodic-image shift of row entry k for the step (_set_row; x is unwrapped: whole laps)
     retry: np.ndarray  # (C,) step fraction from which an active member may try to retire; a retired one is forced again
     flagged: np.ndarray  # (C,) int64 scratch: members that touched one not active, in _forces' order
     go: np.ndarray  # (C,) int64 scratch: the active members of the sub-step, in member order (_kick_drift)
     retired: np.ndarray  # (1,) int64 grain-sub-steps of the block's members while retired
     widened: np.ndarray  # (1,) int64 members whose deviation reached the near filter's slack (_widen)
-    period: np.ndarray  # (3,) the box length of each periodic axis, 0.0 on an open one: image × period is the shift
 
 
 # The set travels between kernels as a StructRef (grains/refs.py), made and grown only in
@@ -613,8 +613,8 @@ def _make_set(c, r):
         np.empty((c, BED_SLOTS, 3)), np.empty((c, BED_SLOTS, 3)), np.empty(c, np.uint8), np.empty(c, np.int64),
         np.empty((c, 3)), np.empty(c, np.int64), np.empty(c), np.empty(c), np.empty(c), np.empty(c, np.int64),
         np.empty(c, np.int64), np.empty(c, np.int64), np.empty(c, np.int64), np.empty(r, np.int32),
-        np.empty((c, 3)), np.empty((r, 3), np.int32), np.empty(c), np.empty(c, np.int64), np.empty(c, np.int64),
-        np.zeros(1, np.int64), np.zeros(1, np.int64), np.zeros(3),
+        np.empty((c, 3)), np.empty((r, 3)), np.empty(c), np.empty(c, np.int64), np.empty(c, np.int64),
+        np.zeros(1, np.int64), np.zeros(1, np.int64),
     )
 
 
@@ -661,7 +661,7 @@ def _grow(cs, c, r):
         _resized(cs.jump_x0, c), _resized(cs.jump_ymax, c), _resized(cs.block, c), _resized(cs.jump_n0, c),
         _resized(cs.jump_c0, c), _resized(cs.nn, c), _resized(cs.nx, r), _resized(cs.at, c),
         _resized(cs.image, r), _resized(cs.retry, c), _resized(cs.flagged, c), _resized(cs.go, c), cs.retired,
-        cs.widened, cs.period,
+        cs.widened,
     )
 
 
@@ -775,8 +775,7 @@ def _grain_force(a, cs, model, s, dt, h, update, blk):
     damp_t = meff * model.gamma_t
     at_radius = model.lever == LEVER_RADIUS
     cur, active, nbr, shear, touch, block, at = cs.cur, cs.active, cs.nbr, cs.shear, cs.touch, cs.block, cs.at
-    image, period = cs.image, cs.period
-    px, py, pz = period[0], period[1], period[2]
+    image = cs.image
     fx = 0.0
     fy = 0.0
     fz = 0.0
@@ -795,10 +794,10 @@ def _grain_force(a, cs, model, s, dt, h, update, blk):
         rsq = d2
         delx = dely = delz = 0.0
         if block[b] == blk:
-            # min_image with the pair's shift of the step (the same bits: cells.image_count)
-            delx = (xi - at[b, 0]) - px * image[k, 0]
-            dely = (yi - at[b, 1]) - py * image[k, 1]
-            delz = (zi - at[b, 2]) - pz * image[k, 2]
+            # min_image with the pair's shift of the step (the same bits: cells.image_shift)
+            delx = (xi - at[b, 0]) - image[k, 0]
+            dely = (yi - at[b, 1]) - image[k, 1]
+            delz = (zi - at[b, 2]) - image[k, 2]
             rsq = delx * delx + dely * dely + delz * delz
         if rsq >= d2:
             if touch[k] != 0:
@@ -1388,7 +1387,7 @@ def _quiet_until(cs, a, s, dt, h, d, blk):
     least = QUIET_MIN * h / span
     if first <= least:
         return 0.0
-    active, nbr, block, image, period = cs.active, cs.nbr, cs.block, cs.image, cs.period
+    active, nbr, block, image = cs.active, cs.nbr, cs.block, cs.image
     r0 = cs.rs[a]
     for k in range(r0, r0 + cs.nn[a]):
         b = nbr[k]
@@ -1398,8 +1397,7 @@ def _quiet_until(cs, a, s, dt, h, d, blk):
         for c in range(3):  # _chord of the two courses
             xa, ua, xa1, ua1 = _rest_of_path(cs, a, s, dt, c)
             xb, ub, xb1, ub1 = _rest_of_path(cs, b, s, dt, c)
-            r2, rd, dd, w0, w1 = _chord_add(r2, rd, dd, w0, w1, (xa - xb) - period[c] * image[k, c],
-                                            (xa1 - xa) - (xb1 - xb),
+            r2, rd, dd, w0, w1 = _chord_add(r2, rd, dd, w0, w1, (xa - xb) - image[k, c], (xa1 - xa) - (xb1 - xb),
                                             ua - ub, ua1 - ub1, span)
         first = min(first, _chord_touch(r2, rd, dd, _bulge(w0, w1), d))
         if first <= least:
@@ -1570,7 +1568,7 @@ def _set_row(cs, a, st, cl, bc, ph):
         b = ph.loc[cl.nbr[g, k]]
         cs.nbr[r0 + k] = b
         for c in range(3):
-            cs.image[r0 + k, c] = image_count(cs.path[a, c] - cs.path[b, c], box[c], per[c])
+            cs.image[r0 + k, c] = image_shift(cs.path[a, c] - cs.path[b, c], box[c], per[c])
         cs.nx[r0 + k] = r0 + k
         cs.touch[r0 + k] = cl.touch[g, k]
         for c in range(3):
@@ -1847,8 +1845,6 @@ def _gather(x0w, st, cl, bc, ph, dt, d, blocked, forced, cs, filtered, threads):
     # room for some woken grains' rows and new neighbours (_give_row grows it if needed)
     cs = _grow(cs, members + members // 8 + 16, rows + rows // 8 + 8 * nbr.shape[1])
     cs.n_rows[0] = 0
-    for c in range(3):
-        cs.period[c] = cl.grid.box[c] if cl.grid.periodic[c] else 0.0
     for p in range(members):
         loc[gid[p]] = new[p]
         cs.gid[new[p]] = gid[p]
