@@ -289,7 +289,7 @@ fails the certificate grows with the grains in it: on the paper's domain at 3.94
 grains) 34 of 100 phases were redone, at 2.07 % (52 189) 23, against none or one in the
 reduced cases. But a far pair
 fails it only if its two deviations add up to 2σ or more, so one of them reached σ. So a
-member whose |δx|² reaches σ² (less room for rounding: _wide_dev2) in _kick_drift is
+member whose |δx|² reaches σ² (less room for rounding: _wide_dev2) in its drift is
 *widened* (_widen): its row and its partners' rows in its block are put back in list
 order with every entry near, it is forced from that sub-step on (a retired one too: its
 quiet time did not look at its far partners), and each of those pairs is looked at by
@@ -312,7 +312,7 @@ Hermite (its path plus a linear δx), bounded by _chord's chord and bulge: the t
 earlier of when that course can reach the bed top (_bed_time) and when it can come within
 d of the course of a near partner that is not active (inactive or retired; _chord_touch,
 the bound by which a candidate joins). It is forced again from the first sub-step at or
-after that time (_kick_drift), and only if that is at least QUIET_MIN = 2 sub-steps away
+after that time (_drift_member), and only if that is at least QUIET_MIN = 2 sub-steps away
 does it retire at all. An active partner needs no check: it looks at the pair at every
 sub-step, and if it touches a retired member (a grain deflected into it) it wakes it as it
 wakes an inactive one (_wake_up): forced again from that sub-step. A retired member keeps
@@ -325,7 +325,7 @@ forced again) work them out from its path and deviation (_velocity_of, _spin_of:
 operations of _set_path, so the same bits). One that may not retire tries again
 RETIRE_BACKOFF = 8 sub-steps later (``ph.retire_backoff``; 0: never), as does one forced
 again when its time is up. The decisions read the partners' states, so they are made as
-_forces goes through the members one after another; in a block cut into lanes (from
+the force pass goes through the members one after another; in a block cut into lanes (from
 LANE_THREADS threads, "Blocks on several threads") no member retires.
 ``counters[RETIRED_SUBSTEPS]`` counts the retired grain-sub-steps (summary.json "timing").
 At 3.94 % (reduced sweep case, after spin-up, 200 steps, one thread): retired for the rest
@@ -342,8 +342,8 @@ Lists instead of scans. In the dense layer a block holds ~2 750 members, of whic
 forced at a sub-step, ~500 retired and the rest not sub-stepped (their ``at`` only): a
 pass that goes through every member to find the forced ones pays a test per member, and
 its branch, taken for a scattered third of them, is mispredicted often. So in a block not
-cut into lanes the kick-drift pass, which goes through every member anyway, lists the active ones in
-member order (``go``), and the force pass goes through that list; the force pass lists
+cut into lanes the drift, which goes through every member anyway, lists the active ones in
+the order it drifts them (``go``), and the forces go through that list (_sweep); they list
 the members that touched one not sub-stepped (``flagged``), and the wake-up's first round
 goes through those instead of the whole block. The same members in the same order: the
 same bits, and the same retirements. At 3.94 % (as above, old and new alternated) the
@@ -429,6 +429,8 @@ RETIRE_BACKOFF = 8  # sub-steps before a member that could not retire tries agai
 QUIET_MIN = 2  # sub-steps: the least quiet time worth retiring a member for
 PARALLEL_MEMBERS = 256  # candidates: a block this large runs its sub-steps on all threads ...
 LANE_THREADS = 3  # ... when there are this many ("Blocks on several threads")
+SWEEP_MEMBERS = 8192  # members: a block this large on one thread is sub-stepped in one sweep ...
+SWEEP_WINDOW = 1024  # ... in which a member is drifted at most this far ahead of its forces ("One sweep")
 MERGED_PASSES = 3  # passes redone with the conflicting groups joined before one that is a single block
 BC_MIN_JUMP_DURATION, BC_MIN_JUMP_HEIGHT = 7, 8  # slots of BedContext.params (bed/jumps.py)
 BED_SLOTS = 4  # bed spheres one grain can touch at once (3 in a hollow of the packed layer)
@@ -518,6 +520,8 @@ class ContactPhase(NamedTuple):
     retire_backoff: np.ndarray  # (1,) float64 RETIRE_BACKOFF (sub-steps; 0: members never retire)
     unblocked: np.ndarray  # (2,) int64 the phase runs as one block before step unblocked[0], set to
     #                        unblocked[1] (UNBLOCKED_STEPS; 0: never) steps on after one giant block ("Blocks")
+    sweep: np.ndarray  # (2,) int64 fewest members of a block sub-stepped in one sweep, and its window
+    #                    (SWEEP_MEMBERS, SWEEP_WINDOW; "One sweep")
     clocks: np.ndarray  # (N_CLOCKS,) s spent in each part (CLOCK_*), added up only when it has that
     #                     length (profiling; length 0: no clock is read)
 
@@ -532,7 +536,7 @@ def make_contact_phase(n: int, block_members: int = BLOCK_MEMBERS,
         np.zeros(n), np.zeros(N_COUNTERS, np.int64), np.array([block_members], np.int64),
         np.array([float(x) for x in block_slack]), np.array([PARALLEL_MEMBERS, LANE_THREADS], np.int64),
         np.array([NEAR_SLACK]), np.array([float(RETIRE_BACKOFF)]), np.array([0, UNBLOCKED_STEPS], np.int64),
-        np.zeros(N_CLOCKS if profile else 0),
+        np.array([SWEEP_MEMBERS, SWEEP_WINDOW], np.int64), np.zeros(N_CLOCKS if profile else 0),
     )
 
 
@@ -585,10 +589,13 @@ class SubstepSet(NamedTuple):
     at: np.ndarray  # (C, 3) every member's position at the sub-step being evaluated (_at)
     image: np.ndarray  # (R, 3) periodic-image shift of row entry k for the step (_set_row; x is unwrapped: whole laps)
     retry: np.ndarray  # (C,) step fraction from which an active member may try to retire; a retired one is forced again
-    flagged: np.ndarray  # (C,) int64 scratch: members that touched one not active, in _forces' order
-    go: np.ndarray  # (C,) int64 scratch: the active members of the sub-step, in member order (_kick_drift)
+    flagged: np.ndarray  # (C,) int64 scratch: members that touched one not active, in the force pass's order
+    go: np.ndarray  # (C,) int64 scratch: the active members of the sub-step, in drift order (_sweep)
     retired: np.ndarray  # (1,) int64 grain-sub-steps of the block's members while retired
     widened: np.ndarray  # (1,) int64 members whose deviation reached the near filter's slack (_widen)
+    drift_order: np.ndarray  # (C,) int64 a swept block's members in the order they are drifted ("One sweep")
+    drift_place: np.ndarray  # (C,) int64 a member's place in drift_order
+    needs: np.ndarray  # (C,) int64 the last place of drift_order drifted before the member's forces
 
 
 # The set travels between kernels as a StructRef (grains/refs.py), made and grown only in
@@ -614,7 +621,8 @@ def _make_set(c, r):
         np.empty((c, 3)), np.empty(c, np.int64), np.empty(c), np.empty(c), np.empty(c), np.empty(c, np.int64),
         np.empty(c, np.int64), np.empty(c, np.int64), np.empty(c, np.int64), np.empty(r, np.int32),
         np.empty((c, 3)), np.empty((r, 3)), np.empty(c), np.empty(c, np.int64), np.empty(c, np.int64),
-        np.zeros(1, np.int64), np.zeros(1, np.int64),
+        np.zeros(1, np.int64), np.zeros(1, np.int64), np.empty(c, np.int64), np.empty(c, np.int64),
+        np.empty(c, np.int64),
     )
 
 
@@ -661,7 +669,7 @@ def _grow(cs, c, r):
         _resized(cs.jump_x0, c), _resized(cs.jump_ymax, c), _resized(cs.block, c), _resized(cs.jump_n0, c),
         _resized(cs.jump_c0, c), _resized(cs.nn, c), _resized(cs.nx, r), _resized(cs.at, c),
         _resized(cs.image, r), _resized(cs.retry, c), _resized(cs.flagged, c), _resized(cs.go, c), cs.retired,
-        cs.widened,
+        cs.widened, _resized(cs.drift_order, c), _resized(cs.drift_place, c), _resized(cs.needs, c),
     )
 
 
@@ -1283,43 +1291,36 @@ def _block_size(cs, lo, hi, app):
     return hi - lo + cs.n[0] - app
 
 
+@njit(cache=True, no_cfunc_wrapper=True, inline="always", error_model="numpy", _nrt=False)
+def _force_member(cs, st, bc, model, a, s, dt, h, update, blk):
+    """Force and torque on active member a at s: its pairs and the bed spheres it touches.
+    Each member's force is its own sum over its own row (both grains of a pair compute it),
+    and it writes only its own fields and row: members can be done in any order. At s = 0
+    (the set-up) the tangential springs and contact records are not advanced: they hold
+    the previous step's last sub-step. (``update`` is a run-time value, not a compile-time
+    one: one compiled copy of the force code serves both.)"""
+    _grain_force(a, cs, model, s, dt, h, update, blk)
+    _bed_force(a, cs, st, bc, s, dt, h, update)
+
+
 @njit(cache=True, no_cfunc_wrapper=True, error_model="numpy", _nrt=False)
-def _forces(cs, st, bc, model, s, dt, h, lo, hi, app, blk, t0, t1, backoff, listed):
-    """Forces on the active members t0..t1-1 of block blk (_block_member; ``listed``: those
-    of cs.go, the active ones _kick_drift listed) at s; returns
-    how many touched a member that was not active (to be woken). At s = 0 (the set-up)
-    the tangential springs and contact records are not advanced: they hold the previous
-    step's last sub-step. (``update`` is a run-time value, not a compile-time one: one
-    compiled copy of the force code serves both.) Each member's force is its own sum over
-    its own row (both grains of a pair compute it): members can be done in any order.
-    The members that touched one not active are listed in cs.flagged[t0:], in this order.
-    ``backoff`` > 0: then a member that touches nothing retires until it may touch
-    something unforced (_quiet_until, which needs the members one after another: which
-    ones retire depends on their order, the result does not), or tries again ``backoff``
-    sub-steps on.
-    Returns how many were woken and the sub-steps the retired members have left."""
+def _forces(cs, st, bc, model, s, dt, h, lo, hi, app, blk, t0, t1):
+    """Forces on the active members t0..t1-1 of block blk (_block_member) at s
+    (_force_member): the set-up at s = 0, a woken member, a lane. No member retires here
+    (_sweep does that). The members that touched one not active are listed in
+    cs.flagged[t0:], in this order; returns how many (to be woken)."""
     update = s > 0.0
     woke = 0
-    left = 0
     active = cs.active
     for t in range(t0, t1):
-        a = cs.go[t] if listed else _block_member(t, lo, hi, app)  # the same members, in the same order
+        a = _block_member(t, lo, hi, app)
         if active[a] != ACTIVE:
             continue
-        _grain_force(a, cs, model, s, dt, h, update, blk)
-        _bed_force(a, cs, st, bc, s, dt, h, update)
+        _force_member(cs, st, bc, model, a, s, dt, h, update, blk)
         if cs.wake[a] != 0:
             cs.flagged[t0 + woke] = a  # for _wake_up; each range t0..t1-1 writes its own part
             woke += 1
-        if backoff > 0.0 and update and s < 1.0 and s >= cs.retry[a] and cs.n_touch[a] == 0:
-            until = _quiet_until(cs, a, s, dt, h, model.diameter, blk)
-            if until > s:
-                active[a] = RETIRED
-                cs.retry[a] = until  # forced again from the first sub-step at or after it
-                left += _substeps_left(s, dt, h)
-            else:
-                cs.retry[a] = _next_try(s, dt, h, backoff)
-    return woke, left
+    return woke
 
 
 @njit(cache=True, no_cfunc_wrapper=True, inline="always")
@@ -1413,58 +1414,175 @@ def _half_kick(dev, ft, a, h, inv_m, inv_i):
         dev[a, 6 + c] += 0.5 * h * ft[a, 3 + c] * inv_i
 
 
+@njit(cache=True, no_cfunc_wrapper=True, inline="always", error_model="numpy", _nrt=False)
+def _drift_member(cs, a, s_next, dt, h, inv_m, inv_i, kick_first, in_lane, backoff, wide2):
+    """First half of a sub-step for member a: half kick and drift if active, its position
+    ``at`` at s_next in any case. ``kick_first``: the previous sub-step's second half kick
+    first (the operations of _kick, in its order; a member that joined since has zero
+    force, so that kick adds exactly zero). A retired member whose quiet time ends by
+    s_next is forced again (it may try to retire again ``backoff`` sub-steps on). A member
+    whose |δx|² reaches ``wide2`` (the near filter's slack; inf: never) has its and its
+    partners' rows widened (_widen) and is forced at s_next, retired or not; in a lane
+    (``in_lane``: rows are shared between lanes) it is widened by _substep_part once
+    every lane has drifted (nothing reads a row before the forces): returns True then."""
+    active, dev, ft, dev_max = cs.active, cs.dev, cs.ft, cs.dev_max
+    if active[a] == 0:
+        _at(cs, a, s_next, dt)
+        return False
+    later = False
+    if active[a] == ACTIVE:  # a retired member's force is +0: its kicks would add exactly nothing
+        if kick_first:
+            _half_kick(dev, ft, a, h, inv_m, inv_i)
+        _half_kick(dev, ft, a, h, inv_m, inv_i)
+    for c in range(3):
+        dev[a, c] += h * dev[a, 3 + c]
+    dd = dev[a, 0] ** 2 + dev[a, 1] ** 2 + dev[a, 2] ** 2
+    if dd > dev_max[a]:
+        if dev_max[a] < wide2 and dd >= wide2:
+            if in_lane:
+                later = True  # a lane (none retires there): widened after the pass
+            else:
+                _widen(cs, a)
+                if active[a] == RETIRED:
+                    cs.retry[a] = s_next  # forced now: its quiet time did not look at its far partners
+        dev_max[a] = dd
+    if not in_lane and active[a] == RETIRED and s_next >= cs.retry[a]:
+        _force_again(cs, a, s_next, dt, h, backoff)  # its quiet time (_quiet_until) is over
+    elif active[a] == ACTIVE:
+        _set_path(cs, a, s_next, dt)
+    else:
+        _set_place(cs, a, s_next, dt)  # retired: its V and W are worked out when read
+    _at(cs, a, s_next, dt)
+    return later
+
+
 @njit(cache=True, no_cfunc_wrapper=True, error_model="numpy", _nrt=False)
-def _kick_drift(cs, model, s_next, dt, h, lo, hi, app, t0, t1, kick_first, listing, backoff, wide2):
-    """First half of a sub-step for the active members t0..t1-1 of a block: half kick,
-    drift (in member order: sequential memory); the others' position ``at``. The forces at
-    s_next follow (_forces), once every member has drifted. ``kick_first``: the previous
-    sub-step's second half kick first, in the same pass (the operations of _kick, in its
-    order; a member that joined since has zero force, so that kick adds exactly zero).
-    ``listing``: also list the members forced at s_next (ACTIVE) in cs.go, in member
-    order, for _forces ("Lists instead of scans"); returns how many (else 0). A retired
-    member whose quiet time ends by s_next is forced again (it may try to retire again
-    ``backoff`` sub-steps on). A member whose |δx|² reaches ``wide2`` (the near filter's
-    slack; inf: never) has its and its partners' rows widened (_widen) and is forced at
-    s_next, retired or not; in a lane (not ``listing``: rows are shared between lanes) it
-    is listed in cs.go from place t0 instead, widened by _substep_part once every lane has
-    drifted (nothing reads a row before the forces), and the count returned."""
+def _kick_drift(cs, model, s_next, dt, h, lo, hi, app, t0, t1, kick_first, wide2):
+    """First half of a sub-step for the members t0..t1-1 of a block in a lane
+    (_substep_part; _drift_member), in member order (sequential memory). The forces at
+    s_next follow (_forces), once every lane has drifted. The members whose deviation
+    reached ``wide2`` are listed in cs.go from place t0, to be widened once every lane
+    has drifted; returns how many."""
     inv_m = 1.0 / model.mass
     inv_i = 1.0 / model.inertia
-    active, dev, ft, dev_max, go = cs.active, cs.dev, cs.ft, cs.dev_max, cs.go
+    go = cs.go
     n_go = 0
     for t in range(t0, t1):
         a = _block_member(t, lo, hi, app)
-        if active[a] == 0:
-            _at(cs, a, s_next, dt)
-            continue
-        if active[a] == ACTIVE:  # a retired member's force is +0: its kicks would add exactly nothing
-            if kick_first:
-                _half_kick(dev, ft, a, h, inv_m, inv_i)
-            _half_kick(dev, ft, a, h, inv_m, inv_i)
-        for c in range(3):
-            dev[a, c] += h * dev[a, 3 + c]
-        dd = dev[a, 0] ** 2 + dev[a, 1] ** 2 + dev[a, 2] ** 2
-        if dd > dev_max[a]:
-            if dev_max[a] < wide2 and dd >= wide2:
-                if listing:
-                    _widen(cs, a)
-                    if active[a] == RETIRED:
-                        cs.retry[a] = s_next  # forced now: its quiet time did not look at its far partners
-                else:
-                    go[t0 + n_go] = a  # a lane (none retires there): widened after the pass
-                    n_go += 1
-            dev_max[a] = dd
-        if listing and active[a] == RETIRED and s_next >= cs.retry[a]:
-            _force_again(cs, a, s_next, dt, h, backoff)  # its quiet time (_quiet_until) is over
-        elif active[a] == ACTIVE:
-            _set_path(cs, a, s_next, dt)
-        else:
-            _set_place(cs, a, s_next, dt)  # retired: its V and W are worked out when read
-        _at(cs, a, s_next, dt)
-        if listing:
+        if _drift_member(cs, a, s_next, dt, h, inv_m, inv_i, kick_first, True, 0.0, wide2):
+            go[t0 + n_go] = a
+            n_go += 1
+    return n_go
+
+
+@njit(cache=True, no_cfunc_wrapper=True, error_model="numpy", _nrt=False)
+def _sweep(cs, st, bc, model, s_next, dt, h, lo, hi, app, blk, kick_first, backoff, wide2, ordered):
+    """One sub-step of a block on one thread, to s_next: every member drifted
+    (_drift_member) and every active one forced (_force_member), each after the members
+    of its row ("One sweep"). The active members are listed in cs.go as they are drifted
+    and forced in that order ("Lists instead of scans"). Not ``ordered``: all members
+    drifted in member order, then the forces. ``ordered`` (_sweep_order): the appended
+    members first, then those of cs.drift_order, each active one forced as soon as the
+    place cs.needs gives is drifted, so that its data and its partners' are still in
+    cache. The members that touched one not active are listed in cs.flagged, in the order
+    of the forces. ``backoff`` > 0: a member that touches nothing retires until it may
+    touch something unforced (_quiet_until, which needs the members one after another:
+    which ones retire depends on their order, the result does not), or tries again
+    ``backoff`` sub-steps on. Returns how many were woken and the sub-steps the retired
+    members have left."""
+    inv_m = 1.0 / model.mass
+    inv_i = 1.0 / model.inertia
+    update = s_next > 0.0
+    active, go, needs, order = cs.active, cs.go, cs.needs, cs.drift_order
+    m = _block_size(cs, lo, hi, app)
+    n_go = 0
+    total = m
+    if ordered:
+        total = hi - lo
+        for t in range(hi - lo, m):  # appended members (woken grains' neighbours): no place in the order
+            a = _block_member(t, lo, hi, app)
+            _drift_member(cs, a, s_next, dt, h, inv_m, inv_i, kick_first, False, backoff, wide2)
             go[n_go] = a
             n_go += active[a] == ACTIVE
-    return n_go
+    woke = 0
+    left = 0
+    f = 0  # go[f]: the next to force
+    p = 0  # places drifted
+    while True:
+        if f < n_go and (p == total or (ordered and needs[go[f]] < p)):
+            a = go[f]
+            f += 1
+            _force_member(cs, st, bc, model, a, s_next, dt, h, update, blk)
+            if cs.wake[a] != 0:
+                cs.flagged[woke] = a  # for _wake_up
+                woke += 1
+            if backoff > 0.0 and update and s_next < 1.0 and s_next >= cs.retry[a] and cs.n_touch[a] == 0:
+                until = _quiet_until(cs, a, s_next, dt, h, model.diameter, blk)
+                if until > s_next:
+                    active[a] = RETIRED
+                    cs.retry[a] = until  # forced again from the first sub-step at or after it
+                    left += _substeps_left(s_next, dt, h)
+                else:
+                    cs.retry[a] = _next_try(s_next, dt, h, backoff)
+        elif p < total:
+            a = order[p] if ordered else _block_member(p, lo, hi, app)
+            p += 1
+            _drift_member(cs, a, s_next, dt, h, inv_m, inv_i, kick_first, False, backoff, wide2)
+            go[n_go] = a
+            n_go += active[a] == ACTIVE
+        else:
+            return woke, left
+
+
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False)
+def _sweep_order(cs, lo, hi, app, blk, window):
+    """The drift order of a swept block ("One sweep"): its members lo..hi-1 in member order
+    (cell order, x outermost), except that a member some member's row holds more than
+    ``window`` places behind it (across the periodic x) comes first; and each member's
+    needs: the last place of its row (near and far entries: a widening reorders any
+    row of the member widened and of its partners) and of itself. A pair counts for both
+    grains (rows are symmetric; were they not, a widening of a's would still reach b's
+    row). Appended members (drifted before the order) add nothing. cs.needs holds the
+    early mark first."""
+    order, place, needs, has_row, nbr = cs.drift_order, cs.drift_place, cs.needs, cs.has_row, cs.nbr
+    m = _block_size(cs, lo, hi, app)
+    for a in range(lo, hi):
+        needs[a] = 0
+    for a in range(lo, hi):
+        if has_row[a] != 0:
+            for k in range(cs.rs[a], cs.rs[a] + cs.rc[a]):
+                b = nbr[k]
+                if lo <= b < hi and b - a > window:
+                    needs[b] = 1
+    p = 0
+    for early in range(1, -1, -1):
+        for a in range(lo, hi):
+            if needs[a] == early:
+                order[p] = a
+                place[a] = p
+                p += 1
+    for t in range(m):
+        a = _block_member(t, lo, hi, app)
+        needs[a] = place[a] if a < hi else -1
+    for t in range(m):
+        a = _block_member(t, lo, hi, app)
+        if has_row[a] != 0:
+            _row_needs(cs, a, lo, hi, blk)
+
+
+@njit(cache=True, no_cfunc_wrapper=True, inline="always", _nrt=False)
+def _row_needs(cs, a, lo, hi, blk):
+    """Member a's row into the needs of a swept block (_sweep_order): a's needs at least
+    each partner's place, each partner with a row's at least a's (appended members have
+    no place: they are drifted first)."""
+    place, needs, has_row, nbr, block = cs.drift_place, cs.needs, cs.has_row, cs.nbr, cs.block
+    pa = place[a] if lo <= a < hi else -1
+    for k in range(cs.rs[a], cs.rs[a] + cs.rc[a]):
+        b = nbr[k]
+        if lo <= b < hi:
+            needs[a] = max(needs[a], place[b])
+        if block[b] == blk and has_row[b] != 0:
+            needs[b] = max(needs[b], pa)
 
 
 @njit(cache=True, no_cfunc_wrapper=True, inline="always", error_model="numpy", _nrt=False)
@@ -1891,13 +2009,14 @@ def _lane_start(q, m, lanes):
 def _candidates_first(new, mstart, gid, start, threads, ph):
     """``new`` (member in cell order → set index) with each block renumbered: its
     candidates first, then its other members (list neighbours only; two in three of a
-    dense block's members, which the sub-steps only place: _kick_drift), each group in its
-    old order. The sub-stepped members are then near in memory. A block cut into lanes
+    dense block's members, which the sub-steps only place: _drift_member), each group in
+    its old order. The sub-stepped members are then near in memory. A block swept in order
+    keeps the cell order, which its drift order follows ("One sweep"). A block cut into lanes
     (_substep_part) is renumbered so within each lane's range, as cut for the gathered
     members: the lanes keep their members (with the candidates first in the whole block,
     one lane would get nearly all the work). The blocks' ranges and the result are
-    unchanged (the members may be done in any order: _forces); which members retire is not
-    (_quiet_until)."""
+    unchanged (the members may be done in any order: _force_member); which members retire
+    is not (_quiet_until)."""
     m = new.shape[0]
     inv = np.empty(m, np.int64)
     for p in range(m):
@@ -1909,6 +2028,8 @@ def _candidates_first(new, mstart, gid, start, threads, ph):
         for t in range(lo, hi):
             n_cand += start[gid[inv[t]]] <= 1.0
         lanes = _lanes(threads, n_cand, ph)
+        if _swept(ph, hi - lo, lanes):
+            continue
         for q in range(lanes):
             t0 = lo + _lane_start(q, hi - lo, lanes)
             t1 = lo + _lane_start(q + 1, hi - lo, lanes)
@@ -2079,13 +2200,13 @@ def _give_row(cs, a, x0w, st, cl, bc, ph):
 
 
 @njit(cache=True, no_cfunc_wrapper=True)
-def _wake_up(cs, x0w, st, bc, model, cl, ph, s, dt, h, lo, hi, app, blk, flagged):
+def _wake_up(cs, x0w, st, bc, model, cl, ph, s, dt, h, lo, hi, app, blk, flagged, ordered):
     """Activate every member of block blk not active that an active one touches (its
     deviation is exactly zero until now) and give it its forces at this sub-step; repeat
-    for the members those touch. ``flagged``: how many members _forces listed in
-    cs.flagged (one pass over the block, in its order), or -1: look through the block's
-    members (a pass cut between threads). Returns the (possibly grown) set and how many
-    were woken."""
+    for the members those touch. ``flagged``: how many members the force pass listed in
+    cs.flagged (_forces, _sweep), or -1: look through the block's members (a pass cut
+    between threads). ``ordered``: a swept block (_sweep_order), whose needs take in each
+    row given here. Returns the (possibly grown) set and how many were woken."""
     box, per = cl.grid.box, cl.grid.periodic
     d2 = model.diameter * model.diameter
     q_lo = 0
@@ -2134,6 +2255,9 @@ def _wake_up(cs, x0w, st, bc, model, cl, ph, s, dt, h, lo, hi, app, blk, flagged
                 continue
             if cs.has_row[b] == 0:
                 cs = _give_row(cs, b, x0w, st, cl, bc, ph)
+                if ordered:
+                    cs.needs[b] = cs.drift_place[b] if lo <= b < hi else -1
+                    _row_needs(as_tuple(cs, SubstepSet), b, lo, hi, blk)
             cs.active[b] = 0
             _activate(as_tuple(cs, SubstepSet), b, s, dt)
         v, sv, bv = as_tuple(cs, SubstepSet), as_tuple(st, GrainState), as_tuple(bc, BedContext)
@@ -2142,10 +2266,9 @@ def _wake_up(cs, x0w, st, bc, model, cl, ph, s, dt, h, lo, hi, app, blk, flagged
         _positions(v, s, dt, n_before, v.n[0], v.n[0], np.int64(0), v.n[0] - n_before)
         for t in range(q_hi, q_new):
             # b alone (as members b..b and none appended): the compiled _forces, not a
-            # second inlined copy of the force code (wake-ups are rare). Its flags are
-            # run-time values (s < 0: False): a literal True or False would compile it once more
+            # third inlined copy of the force code (wake-ups are rare)
             b = v.queue[t]
-            _forces(v, sv, bv, model, s, dt, h, b, b + 1, v.n[0], blk, np.int64(0), np.int64(1), 0.0, s < 0.0)
+            _forces(v, sv, bv, model, s, dt, h, b, b + 1, v.n[0], blk, np.int64(0), np.int64(1))
         q_lo = q_hi
         q_hi = q_new
     return cs, q_hi - recalled
@@ -2173,12 +2296,10 @@ def _substep_part(part, cs, st, bc, model, s, dt, h, lo, hi, app, blk, lanes, pe
         t1 = _lane_start(q + 1, m, lanes)
         v = as_tuple(cs, SubstepSet)  # the hot loops read tuples (grains/refs.py)
         if part == KICK_DRIFT or part == KICK_KICK_DRIFT:
-            # the flags as run-time values (part < 0: False), as in _run_block
-            per_lane[q] = _kick_drift(v, model, s, dt, h, lo, hi, app, t0, t1, part == KICK_KICK_DRIFT, part < 0,
-                                      0.0, wide2)
+            per_lane[q] = _kick_drift(v, model, s, dt, h, lo, hi, app, t0, t1, part == KICK_KICK_DRIFT, wide2)
         elif part == FORCES:
             per_lane[q] = _forces(v, as_tuple(st, GrainState), as_tuple(bc, BedContext), model, s, dt, h,
-                                  lo, hi, app, blk, t0, t1, 0.0, part < 0)[0]
+                                  lo, hi, app, blk, t0, t1)
         else:
             _kick(v, model, h, lo, hi, app, t0, t1)
     if part == FORCES:
@@ -2197,7 +2318,9 @@ def _run_block(cs, cand, c0, c1, lo, hi, blk, x0w, st, bc, model, cl, ph, dt, n_
     """All sub-steps of one block: members lo..hi-1, candidates cand[c0:c1]; members
     appended while it runs (woken grains' neighbours) belong to it. With ``lanes`` > 1
     each part of a sub-step runs over the members in parallel (_substep_part); joins and
-    wake-ups stay serial. Returns the set, the grain-sub-steps done and the grains woken."""
+    wake-ups stay serial. On one thread each sub-step is one _sweep, ordered (_sweep_order)
+    when the block has at least ph.sweep[0] members ("One sweep"). Returns the set, the
+    grain-sub-steps done and the grains woken."""
     h = dt / n_sub
     app = cs.n[0]
     backoff = ph.retire_backoff[0]
@@ -2209,19 +2332,20 @@ def _run_block(cs, cand, c0, c1, lo, hi, blk, x0w, st, bc, model, cl, ph, dt, n_
     woken = 0
     per_lane = np.zeros(max(lanes, 1), np.int64)  # each lane's count (_substep_part)
     first = np.int64(0)  # not the literal 0: that would compile the kernels once more
-    listed, scanned = first == 0, first != 0  # True and False, likewise not literals
+    ordered = _swept(ph, hi - lo, lanes)
     # the sub-step kernels read tuples (grains/refs.as_tuple); the set's view is made
     # again whenever a wake-up may have grown the set
     v, sv, bv = as_tuple(cs, SubstepSet), as_tuple(st, GrainState), as_tuple(bc, BedContext)
+    if ordered:
+        _sweep_order(v, lo, hi, app, blk, ph.sweep[1])
     # set-up: forces at s = 0 of the grains in contact now, without advancing the
     # tangential springs (their state is that of the previous step's last sub-step)
     ptr, joined = _join(v, cand, c0, c1, 0.0, 0.0, dt)
     n_act += joined
     _positions(v, 0.0, dt, lo, hi, app, first, _block_size(v, lo, hi, app))
-    n_woke = _forces(v, sv, bv, model, 0.0, dt, h, lo, hi, app, blk, first, _block_size(v, lo, hi, app), 0.0,
-                     scanned)[0]
+    n_woke = _forces(v, sv, bv, model, 0.0, dt, h, lo, hi, app, blk, first, _block_size(v, lo, hi, app))
     if n_woke > 0:
-        cs, k_w = _wake_up(cs, x0w, st, bc, model, cl, ph, 0.0, dt, h, lo, hi, app, blk, n_woke)
+        cs, k_w = _wake_up(cs, x0w, st, bc, model, cl, ph, 0.0, dt, h, lo, hi, app, blk, n_woke, ordered)
         n_act += k_w
         woken += k_w
         v = as_tuple(cs, SubstepSet)
@@ -2240,13 +2364,11 @@ def _run_block(cs, cand, c0, c1, lo, hi, blk, x0w, st, bc, model, cl, ph, dt, n_
             n_woke = _substep_part(np.int64(FORCES), cs, st, bc, model, s_next, dt, h, lo, hi, app, blk,
                                    lanes, per_lane, wide2)
         else:
-            m = _block_size(v, lo, hi, app)
-            n_go = _kick_drift(v, model, s_next, dt, h, lo, hi, app, first, m, k > 0, listed, backoff, wide2)
-            n_woke, left = _forces(v, sv, bv, model, s_next, dt, h, lo, hi, app, blk, first, n_go, backoff, listed)
+            n_woke, left = _sweep(v, sv, bv, model, s_next, dt, h, lo, hi, app, blk, k > 0, backoff, wide2, ordered)
             cs.retired[0] += left
         if n_woke > 0:
             cs, k_w = _wake_up(cs, x0w, st, bc, model, cl, ph, s_next, dt, h, lo, hi, app, blk,
-                               n_woke if lanes == 1 else -1)
+                               n_woke if lanes == 1 else -1, ordered)
             n_act += k_w
             woken += k_w
             v = as_tuple(cs, SubstepSet)
@@ -2256,6 +2378,13 @@ def _run_block(cs, cand, c0, c1, lo, hi, blk, x0w, st, bc, model, cl, ph, dt, n_
     else:
         _kick(v, model, h, lo, hi, app, first, _block_size(v, lo, hi, app))
     return cs, done, woken
+
+
+@njit(cache=True, no_cfunc_wrapper=True, inline="always")
+def _swept(ph, members, lanes):
+    """Whether a block of ``members`` (its gathered ones) run on ``lanes`` threads is
+    sub-stepped in ordered sweeps ("One sweep")."""
+    return lanes == 1 and members >= ph.sweep[0]
 
 
 @njit(cache=True, no_cfunc_wrapper=True, inline="always")
