@@ -251,18 +251,19 @@ def test_a_block_cut_into_lanes_widens_the_rows_too_instead_of_redoing_the_phase
 def test_a_block_swept_in_order_gives_the_result_of_drifting_every_member_before_the_forces():
     # "One sweep": each member forced as soon as the members of its row have drifted, in
     # an order that puts the members a row reaches across the periodic x (more than a
-    # window behind) first; narrow windows put many first. The result of the unordered
+    # window behind) first; narrow windows put many first; chunks of 1 to 64 drifted between
+    # looks at the forces due. The result of the unordered
     # sweep (every member drifted, then the forces) bit for bit, through wake-ups,
     # retirements and widened rows (σ = 0.02 d), in one block and in many
     box, pos, vel = _layer(12.0, 5)
     for members, near_slack in ((10 ** 9, None), (10 ** 9, 0.02), (1, None)):
-        plain = _run(pos, vel, members, box, 0.6, 5, 0.02, near_slack=near_slack, sweep=(10 ** 9, 1024))
+        plain = _run(pos, vel, members, box, 0.6, 5, 0.02, near_slack=near_slack, sweep=(10 ** 9, 1024, 64))
         assert plain[1].collisions.sum() > 20 and plain[2].counters[WAKES] > 0
         assert plain[2].counters[RETIRED_SUBSTEPS] > 0
         if near_slack is not None:
             assert plain[2].counters[WIDENED] >= 5
-        for window in (2, 16, 10 ** 6):
-            swept = _run(pos, vel, members, box, 0.6, 5, 0.02, near_slack=near_slack, sweep=(0, window))
+        for window, chunk in ((2, 1), (16, 7), (10 ** 6, 64)):
+            swept = _run(pos, vel, members, box, 0.6, 5, 0.02, near_slack=near_slack, sweep=(0, window, chunk))
             _same(swept, plain)
             # the same work but for which members retired (they are forced in another order)
             c, c0 = swept[2].counters, plain[2].counters

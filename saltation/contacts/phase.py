@@ -431,6 +431,7 @@ PARALLEL_MEMBERS = 256  # candidates: a block this large runs its sub-steps on a
 LANE_THREADS = 3  # ... when there are this many ("Blocks on several threads")
 SWEEP_MEMBERS = 8192  # members: a block this large on one thread is sub-stepped in one sweep ...
 SWEEP_WINDOW = 1024  # ... in which a member is drifted at most this far ahead of its forces ("One sweep")
+SWEEP_CHUNK = 64  # members drifted between looks at which members' forces are due
 MERGED_PASSES = 3  # passes redone with the conflicting groups joined before one that is a single block
 BC_MIN_JUMP_DURATION, BC_MIN_JUMP_HEIGHT = 7, 8  # slots of BedContext.params (bed/jumps.py)
 BED_SLOTS = 4  # bed spheres one grain can touch at once (3 in a hollow of the packed layer)
@@ -520,8 +521,8 @@ class ContactPhase(NamedTuple):
     retire_backoff: np.ndarray  # (1,) float64 RETIRE_BACKOFF (sub-steps; 0: members never retire)
     unblocked: np.ndarray  # (2,) int64 the phase runs as one block before step unblocked[0], set to
     #                        unblocked[1] (UNBLOCKED_STEPS; 0: never) steps on after one giant block ("Blocks")
-    sweep: np.ndarray  # (2,) int64 fewest members of a block sub-stepped in one sweep, and its window
-    #                    (SWEEP_MEMBERS, SWEEP_WINDOW; "One sweep")
+    sweep: np.ndarray  # (3,) int64 fewest members of a block sub-stepped in one sweep, its window and
+    #                    chunk (SWEEP_MEMBERS, SWEEP_WINDOW, SWEEP_CHUNK; "One sweep")
     clocks: np.ndarray  # (N_CLOCKS,) s spent in each part (CLOCK_*), added up only when it has that
     #                     length (profiling; length 0: no clock is read)
 
@@ -536,7 +537,7 @@ def make_contact_phase(n: int, block_members: int = BLOCK_MEMBERS,
         np.zeros(n), np.zeros(N_COUNTERS, np.int64), np.array([block_members], np.int64),
         np.array([float(x) for x in block_slack]), np.array([PARALLEL_MEMBERS, LANE_THREADS], np.int64),
         np.array([NEAR_SLACK]), np.array([float(RETIRE_BACKOFF)]), np.array([0, UNBLOCKED_STEPS], np.int64),
-        np.array([SWEEP_MEMBERS, SWEEP_WINDOW], np.int64), np.zeros(N_CLOCKS if profile else 0),
+        np.array([SWEEP_MEMBERS, SWEEP_WINDOW, SWEEP_CHUNK], np.int64), np.zeros(N_CLOCKS if profile else 0),
     )
 
 
@@ -1476,7 +1477,7 @@ def _kick_drift(cs, model, s_next, dt, h, lo, hi, app, t0, t1, kick_first, wide2
 
 
 @njit(cache=True, no_cfunc_wrapper=True, error_model="numpy", _nrt=False)
-def _sweep(cs, st, bc, model, s_next, dt, h, lo, hi, app, blk, kick_first, backoff, wide2, ordered):
+def _sweep(cs, st, bc, model, s_next, dt, h, lo, hi, app, blk, kick_first, backoff, wide2, ordered, chunk):
     """One sub-step of a block on one thread, to s_next: every member drifted
     (_drift_member) and every active one forced (_force_member), each after the members
     of its row ("One sweep"). The active members are listed in cs.go as they are drifted
@@ -1509,7 +1510,14 @@ def _sweep(cs, st, bc, model, s_next, dt, h, lo, hi, app, blk, kick_first, backo
     f = 0  # go[f]: the next to force
     p = 0  # places drifted
     while True:
-        if f < n_go and (p == total or (ordered and needs[go[f]] < p)):
+        q = min(p + chunk, total) if ordered else total
+        for t in range(p, q):
+            a = order[t] if ordered else _block_member(t, lo, hi, app)
+            _drift_member(cs, a, s_next, dt, h, inv_m, inv_i, kick_first, False, backoff, wide2)
+            go[n_go] = a
+            n_go += active[a] == ACTIVE
+        p = q
+        while f < n_go and (p == total or needs[go[f]] < p):
             a = go[f]
             f += 1
             _force_member(cs, st, bc, model, a, s_next, dt, h, update, blk)
@@ -1524,13 +1532,7 @@ def _sweep(cs, st, bc, model, s_next, dt, h, lo, hi, app, blk, kick_first, backo
                     left += _substeps_left(s_next, dt, h)
                 else:
                     cs.retry[a] = _next_try(s_next, dt, h, backoff)
-        elif p < total:
-            a = order[p] if ordered else _block_member(p, lo, hi, app)
-            p += 1
-            _drift_member(cs, a, s_next, dt, h, inv_m, inv_i, kick_first, False, backoff, wide2)
-            go[n_go] = a
-            n_go += active[a] == ACTIVE
-        else:
+        if p == total:
             return woke, left
 
 
@@ -2364,7 +2366,8 @@ def _run_block(cs, cand, c0, c1, lo, hi, blk, x0w, st, bc, model, cl, ph, dt, n_
             n_woke = _substep_part(np.int64(FORCES), cs, st, bc, model, s_next, dt, h, lo, hi, app, blk,
                                    lanes, per_lane, wide2)
         else:
-            n_woke, left = _sweep(v, sv, bv, model, s_next, dt, h, lo, hi, app, blk, k > 0, backoff, wide2, ordered)
+            n_woke, left = _sweep(v, sv, bv, model, s_next, dt, h, lo, hi, app, blk, k > 0, backoff, wide2, ordered,
+                                 ph.sweep[2])
             cs.retired[0] += left
         if n_woke > 0:
             cs, k_w = _wake_up(cs, x0w, st, bc, model, cl, ph, s_next, dt, h, lo, hi, app, blk,
