@@ -8,23 +8,15 @@ import numpy as np
 from test_collide_layout import run_contact_phase
 
 from saltation.contacts import pairs as K
-from saltation.contacts.phase import (
-    BLOCKS,
-    MERGED_PASSES,
-    PARALLEL_BLOCKS,
-    REDONE_FAR,
-    RETIRED_SUBSTEPS,
-    WAKES,
-    WIDENED,
-)
+from saltation.contacts.phase import BLOCKS, MERGED_PASSES, PARALLEL_BLOCKS, REDONE_FAR, WAKES, WIDENED
 
 TWO_THREADS = min(2, numba.config.NUMBA_NUM_THREADS)
 
 
 def _run(pos0, vel0, block_members, box, skin, steps, dt, n_sub=128, block_slack=None, threads=1,
-         parallel_members=None, near_slack=None, sweep=None):
+         parallel_members=None, near_slack=None):
     return run_contact_phase(pos0, vel0, steps, dt, n_sub, box, skin, 0.3, 0.3, block_members, block_slack,
-                             threads, parallel_members, near_slack, sweep=sweep)
+                             threads, parallel_members, near_slack)
 
 
 def _same(a, b):
@@ -246,29 +238,6 @@ def test_a_block_cut_into_lanes_widens_the_rows_too_instead_of_redoing_the_phase
     assert lanes[2].counters[REDONE_FAR] == 0
     _same(lanes, plain)
     np.testing.assert_array_equal(lanes[2].counters[:3], plain[2].counters[:3])
-
-
-def test_a_block_swept_in_order_gives_the_result_of_drifting_every_member_before_the_forces():
-    # "One sweep": each member forced as soon as the members of its row have drifted, in
-    # an order that puts the members a row reaches across the periodic x (more than a
-    # window behind) first; narrow windows put many first; chunks of 1 to 64 drifted between
-    # looks at the forces due. The result of the unordered
-    # sweep (every member drifted, then the forces) bit for bit, through wake-ups,
-    # retirements and widened rows (σ = 0.02 d), in one block and in many
-    box, pos, vel = _layer(12.0, 5)
-    for members, near_slack in ((10 ** 9, None), (10 ** 9, 0.02), (1, None)):
-        plain = _run(pos, vel, members, box, 0.6, 5, 0.02, near_slack=near_slack, sweep=(10 ** 9, 1024, 64))
-        assert plain[1].collisions.sum() > 20 and plain[2].counters[WAKES] > 0
-        assert plain[2].counters[RETIRED_SUBSTEPS] > 0
-        if near_slack is not None:
-            assert plain[2].counters[WIDENED] >= 5
-        for window, chunk in ((2, 1), (16, 7), (10 ** 6, 64)):
-            swept = _run(pos, vel, members, box, 0.6, 5, 0.02, near_slack=near_slack, sweep=(0, window, chunk))
-            _same(swept, plain)
-            # the same work but for which members retired (they are forced in another order)
-            c, c0 = swept[2].counters, plain[2].counters
-            np.testing.assert_array_equal(c[:RETIRED_SUBSTEPS], c0[:RETIRED_SUBSTEPS])
-            assert c[WIDENED] == c0[WIDENED] and c[RETIRED_SUBSTEPS] > 0
 
 
 def test_near_entries_go_first_in_row_order_and_remember_their_list_entries():

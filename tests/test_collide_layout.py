@@ -31,7 +31,7 @@ from saltation.flight.spheres import make_state, make_workspace
 
 def run_contact_phase(pos0, vel0, steps=3, dt=0.02, n_sub=128, box=(12.0, 8.0, 12.0), skin=0.6, friction=0.2,
                       bed_friction=0.1, block_members=None, block_slack=None, threads=1,
-                      parallel_members=None, near_slack=None, retire_backoff=None, sweep=None):
+                      parallel_members=None, near_slack=None, retire_backoff=None):
     """Straight-line free flight plus the contact phase for ``steps`` steps (virtual bed) on
     ``threads`` Numba threads; returns the state, the list and the phase."""
     n = len(pos0)
@@ -50,8 +50,6 @@ def run_contact_phase(pos0, vel0, steps=3, dt=0.02, n_sub=128, box=(12.0, 8.0, 1
         ph.near_slack[0] = near_slack
     if retire_backoff is not None:
         ph.retire_backoff[0] = retire_backoff
-    if sweep is not None:  # (fewest members of a block swept in order, window; contacts/phase.py "One sweep")
-        ph.sweep[:] = sweep
     bc = make_bed_context(n, False, make_packed_bed(3.0, 3.0), 0.65, bed_friction, 0.5, model.kn, model.kt, 0,
                           np.full(n, -2, np.int64))
     cs = empty_substep_set()

@@ -266,6 +266,16 @@ one grain made more than the other, hundreds in a 200 s run) 8.16 → 7.77 on av
 seven pairs (−11 % to +7 %). ``nbr`` and ``nx`` stayed int32; the image is kept as its
 shift, with nothing derived to keep in step with the grid. Splitting the path row so that
 placing a member reads 96 of its 144 bytes gave nothing (7.46 / 8.42 against 6.69 / 8.33).
+Nor did one sweep per sub-step that forces each member as soon as the members of its row
+have drifted (the block kept in cell order, the members a row reaches across the periodic
+x drifted first; the same bits, and a test that failed when a member's forces did not
+wait for its row): on an Intel Xeon VM (Emerald Rapids: 2 MB L2, 300 MB L3; 2026-12-07),
+paper's domain at 3.94 %, 60 steps from the 1 s spin-up, alternated with the code before,
+the sub-steps took 5.00–5.54 µs per grain-step against 3.85–4.04, and the cell order
+alone (drift, then forces) 4.46: on that machine the fusion and the lost candidates-first
+order each cost time. Not kept (git history: 41a29f6, 222cd0d); not measured on a CPU with
+a smaller cache, where the full-size sub-steps cost most (AMD EPYC znver5: 180 ns per
+grain-sub-step done against 58 in the reduced case).
 
 Near pairs. A grain's row holds every list neighbour (cutoff d + skin; in the dense layer
 the skin is widened for the fast grains above it: ~21 entries per engaged grain at 3.94 %),
@@ -429,9 +439,6 @@ RETIRE_BACKOFF = 8  # sub-steps before a member that could not retire tries agai
 QUIET_MIN = 2  # sub-steps: the least quiet time worth retiring a member for
 PARALLEL_MEMBERS = 256  # candidates: a block this large runs its sub-steps on all threads ...
 LANE_THREADS = 3  # ... when there are this many ("Blocks on several threads")
-SWEEP_MEMBERS = 8192  # members: a block this large on one thread is sub-stepped in one sweep ...
-SWEEP_WINDOW = 1024  # ... in which a member is drifted at most this far ahead of its forces ("One sweep")
-SWEEP_CHUNK = 64  # members drifted between looks at which members' forces are due
 MERGED_PASSES = 3  # passes redone with the conflicting groups joined before one that is a single block
 BC_MIN_JUMP_DURATION, BC_MIN_JUMP_HEIGHT = 7, 8  # slots of BedContext.params (bed/jumps.py)
 BED_SLOTS = 4  # bed spheres one grain can touch at once (3 in a hollow of the packed layer)
@@ -521,8 +528,6 @@ class ContactPhase(NamedTuple):
     retire_backoff: np.ndarray  # (1,) float64 RETIRE_BACKOFF (sub-steps; 0: members never retire)
     unblocked: np.ndarray  # (2,) int64 the phase runs as one block before step unblocked[0], set to
     #                        unblocked[1] (UNBLOCKED_STEPS; 0: never) steps on after one giant block ("Blocks")
-    sweep: np.ndarray  # (3,) int64 fewest members of a block sub-stepped in one sweep, its window and
-    #                    chunk (SWEEP_MEMBERS, SWEEP_WINDOW, SWEEP_CHUNK; "One sweep")
     clocks: np.ndarray  # (N_CLOCKS,) s spent in each part (CLOCK_*), added up only when it has that
     #                     length (profiling; length 0: no clock is read)
 
@@ -537,7 +542,7 @@ def make_contact_phase(n: int, block_members: int = BLOCK_MEMBERS,
         np.zeros(n), np.zeros(N_COUNTERS, np.int64), np.array([block_members], np.int64),
         np.array([float(x) for x in block_slack]), np.array([PARALLEL_MEMBERS, LANE_THREADS], np.int64),
         np.array([NEAR_SLACK]), np.array([float(RETIRE_BACKOFF)]), np.array([0, UNBLOCKED_STEPS], np.int64),
-        np.array([SWEEP_MEMBERS, SWEEP_WINDOW, SWEEP_CHUNK], np.int64), np.zeros(N_CLOCKS if profile else 0),
+        np.zeros(N_CLOCKS if profile else 0),
     )
 
 
@@ -594,9 +599,6 @@ class SubstepSet(NamedTuple):
     go: np.ndarray  # (C,) int64 scratch: the active members of the sub-step, in drift order (_sweep)
     retired: np.ndarray  # (1,) int64 grain-sub-steps of the block's members while retired
     widened: np.ndarray  # (1,) int64 members whose deviation reached the near filter's slack (_widen)
-    drift_order: np.ndarray  # (C,) int64 a swept block's members in the order they are drifted ("One sweep")
-    drift_place: np.ndarray  # (C,) int64 a member's place in drift_order
-    needs: np.ndarray  # (C,) int64 the last place of drift_order drifted before the member's forces
 
 
 # The set travels between kernels as a StructRef (grains/refs.py), made and grown only in
@@ -622,8 +624,7 @@ def _make_set(c, r):
         np.empty((c, 3)), np.empty(c, np.int64), np.empty(c), np.empty(c), np.empty(c), np.empty(c, np.int64),
         np.empty(c, np.int64), np.empty(c, np.int64), np.empty(c, np.int64), np.empty(r, np.int32),
         np.empty((c, 3)), np.empty((r, 3)), np.empty(c), np.empty(c, np.int64), np.empty(c, np.int64),
-        np.zeros(1, np.int64), np.zeros(1, np.int64), np.empty(c, np.int64), np.empty(c, np.int64),
-        np.empty(c, np.int64),
+        np.zeros(1, np.int64), np.zeros(1, np.int64),
     )
 
 
@@ -670,7 +671,7 @@ def _grow(cs, c, r):
         _resized(cs.jump_x0, c), _resized(cs.jump_ymax, c), _resized(cs.block, c), _resized(cs.jump_n0, c),
         _resized(cs.jump_c0, c), _resized(cs.nn, c), _resized(cs.nx, r), _resized(cs.at, c),
         _resized(cs.image, r), _resized(cs.retry, c), _resized(cs.flagged, c), _resized(cs.go, c), cs.retired,
-        cs.widened, _resized(cs.drift_order, c), _resized(cs.drift_place, c), _resized(cs.needs, c),
+        cs.widened,
     )
 
 
@@ -1477,114 +1478,43 @@ def _kick_drift(cs, model, s_next, dt, h, lo, hi, app, t0, t1, kick_first, wide2
 
 
 @njit(cache=True, no_cfunc_wrapper=True, error_model="numpy", _nrt=False)
-def _sweep(cs, st, bc, model, s_next, dt, h, lo, hi, app, blk, kick_first, backoff, wide2, ordered, chunk):
+def _sweep(cs, st, bc, model, s_next, dt, h, lo, hi, app, blk, kick_first, backoff, wide2):
     """One sub-step of a block on one thread, to s_next: every member drifted
-    (_drift_member) and every active one forced (_force_member), each after the members
-    of its row ("One sweep"). The active members are listed in cs.go as they are drifted
-    and forced in that order ("Lists instead of scans"). Not ``ordered``: all members
-    drifted in member order, then the forces. ``ordered`` (_sweep_order): the appended
-    members first, then those of cs.drift_order, each active one forced as soon as the
-    place cs.needs gives is drifted, so that its data and its partners' are still in
-    cache. The members that touched one not active are listed in cs.flagged, in the order
-    of the forces. ``backoff`` > 0: a member that touches nothing retires until it may
-    touch something unforced (_quiet_until, which needs the members one after another:
-    which ones retire depends on their order, the result does not), or tries again
-    ``backoff`` sub-steps on. Returns how many were woken and the sub-steps the retired
-    members have left."""
+    (_drift_member) in member order (sequential memory), listing the active ones in cs.go
+    ("Lists instead of scans"), then the forces on those (_force_member), once every member
+    has drifted. The members that touched one not active are listed in cs.flagged, in
+    this order. ``backoff`` > 0: a member that touches nothing retires until it may touch
+    something unforced (_quiet_until, which needs the members one after another: which
+    ones retire depends on their order, the result does not), or tries again ``backoff``
+    sub-steps on. Returns how many were woken and the sub-steps the retired members have
+    left."""
     inv_m = 1.0 / model.mass
     inv_i = 1.0 / model.inertia
     update = s_next > 0.0
-    active, go, needs, order = cs.active, cs.go, cs.needs, cs.drift_order
-    m = _block_size(cs, lo, hi, app)
+    active, go = cs.active, cs.go
     n_go = 0
-    total = m
-    if ordered:
-        total = hi - lo
-        for t in range(hi - lo, m):  # appended members (woken grains' neighbours): no place in the order
-            a = _block_member(t, lo, hi, app)
-            _drift_member(cs, a, s_next, dt, h, inv_m, inv_i, kick_first, False, backoff, wide2)
-            go[n_go] = a
-            n_go += active[a] == ACTIVE
+    for t in range(_block_size(cs, lo, hi, app)):
+        a = _block_member(t, lo, hi, app)
+        _drift_member(cs, a, s_next, dt, h, inv_m, inv_i, kick_first, False, backoff, wide2)
+        go[n_go] = a
+        n_go += active[a] == ACTIVE
     woke = 0
     left = 0
-    f = 0  # go[f]: the next to force
-    p = 0  # places drifted
-    while True:
-        q = min(p + chunk, total) if ordered else total
-        for t in range(p, q):
-            a = order[t] if ordered else _block_member(t, lo, hi, app)
-            _drift_member(cs, a, s_next, dt, h, inv_m, inv_i, kick_first, False, backoff, wide2)
-            go[n_go] = a
-            n_go += active[a] == ACTIVE
-        p = q
-        while f < n_go and (p == total or needs[go[f]] < p):
-            a = go[f]
-            f += 1
-            _force_member(cs, st, bc, model, a, s_next, dt, h, update, blk)
-            if cs.wake[a] != 0:
-                cs.flagged[woke] = a  # for _wake_up
-                woke += 1
-            if backoff > 0.0 and update and s_next < 1.0 and s_next >= cs.retry[a] and cs.n_touch[a] == 0:
-                until = _quiet_until(cs, a, s_next, dt, h, model.diameter, blk)
-                if until > s_next:
-                    active[a] = RETIRED
-                    cs.retry[a] = until  # forced again from the first sub-step at or after it
-                    left += _substeps_left(s_next, dt, h)
-                else:
-                    cs.retry[a] = _next_try(s_next, dt, h, backoff)
-        if p == total:
-            return woke, left
-
-
-@njit(cache=True, no_cfunc_wrapper=True, _nrt=False)
-def _sweep_order(cs, lo, hi, app, blk, window):
-    """The drift order of a swept block ("One sweep"): its members lo..hi-1 in member order
-    (cell order, x outermost), except that a member some member's row holds more than
-    ``window`` places behind it (across the periodic x) comes first; and each member's
-    needs: the last place of its row (near and far entries: a widening reorders any
-    row of the member widened and of its partners) and of itself. A pair counts for both
-    grains (rows are symmetric; were they not, a widening of a's would still reach b's
-    row). Appended members (drifted before the order) add nothing. cs.needs holds the
-    early mark first."""
-    order, place, needs, has_row, nbr = cs.drift_order, cs.drift_place, cs.needs, cs.has_row, cs.nbr
-    m = _block_size(cs, lo, hi, app)
-    for a in range(lo, hi):
-        needs[a] = 0
-    for a in range(lo, hi):
-        if has_row[a] != 0:
-            for k in range(cs.rs[a], cs.rs[a] + cs.rc[a]):
-                b = nbr[k]
-                if lo <= b < hi and b - a > window:
-                    needs[b] = 1
-    p = 0
-    for early in range(1, -1, -1):
-        for a in range(lo, hi):
-            if needs[a] == early:
-                order[p] = a
-                place[a] = p
-                p += 1
-    for t in range(m):
-        a = _block_member(t, lo, hi, app)
-        needs[a] = place[a] if a < hi else -1
-    for t in range(m):
-        a = _block_member(t, lo, hi, app)
-        if has_row[a] != 0:
-            _row_needs(cs, a, lo, hi, blk)
-
-
-@njit(cache=True, no_cfunc_wrapper=True, inline="always", _nrt=False)
-def _row_needs(cs, a, lo, hi, blk):
-    """Member a's row into the needs of a swept block (_sweep_order): a's needs at least
-    each partner's place, each partner with a row's at least a's (appended members have
-    no place: they are drifted first)."""
-    place, needs, has_row, nbr, block = cs.drift_place, cs.needs, cs.has_row, cs.nbr, cs.block
-    pa = place[a] if lo <= a < hi else -1
-    for k in range(cs.rs[a], cs.rs[a] + cs.rc[a]):
-        b = nbr[k]
-        if lo <= b < hi:
-            needs[a] = max(needs[a], place[b])
-        if block[b] == blk and has_row[b] != 0:
-            needs[b] = max(needs[b], pa)
+    for f in range(n_go):
+        a = go[f]
+        _force_member(cs, st, bc, model, a, s_next, dt, h, update, blk)
+        if cs.wake[a] != 0:
+            cs.flagged[woke] = a  # for _wake_up
+            woke += 1
+        if backoff > 0.0 and update and s_next < 1.0 and s_next >= cs.retry[a] and cs.n_touch[a] == 0:
+            until = _quiet_until(cs, a, s_next, dt, h, model.diameter, blk)
+            if until > s_next:
+                active[a] = RETIRED
+                cs.retry[a] = until  # forced again from the first sub-step at or after it
+                left += _substeps_left(s_next, dt, h)
+            else:
+                cs.retry[a] = _next_try(s_next, dt, h, backoff)
+    return woke, left
 
 
 @njit(cache=True, no_cfunc_wrapper=True, inline="always", error_model="numpy", _nrt=False)
@@ -2012,8 +1942,7 @@ def _candidates_first(new, mstart, gid, start, threads, ph):
     """``new`` (member in cell order → set index) with each block renumbered: its
     candidates first, then its other members (list neighbours only; two in three of a
     dense block's members, which the sub-steps only place: _drift_member), each group in
-    its old order. The sub-stepped members are then near in memory. A block swept in order
-    keeps the cell order, which its drift order follows ("One sweep"). A block cut into lanes
+    its old order. The sub-stepped members are then near in memory. A block cut into lanes
     (_substep_part) is renumbered so within each lane's range, as cut for the gathered
     members: the lanes keep their members (with the candidates first in the whole block,
     one lane would get nearly all the work). The blocks' ranges and the result are
@@ -2030,8 +1959,6 @@ def _candidates_first(new, mstart, gid, start, threads, ph):
         for t in range(lo, hi):
             n_cand += start[gid[inv[t]]] <= 1.0
         lanes = _lanes(threads, n_cand, ph)
-        if _swept(ph, hi - lo, lanes):
-            continue
         for q in range(lanes):
             t0 = lo + _lane_start(q, hi - lo, lanes)
             t1 = lo + _lane_start(q + 1, hi - lo, lanes)
@@ -2202,13 +2129,12 @@ def _give_row(cs, a, x0w, st, cl, bc, ph):
 
 
 @njit(cache=True, no_cfunc_wrapper=True)
-def _wake_up(cs, x0w, st, bc, model, cl, ph, s, dt, h, lo, hi, app, blk, flagged, ordered):
+def _wake_up(cs, x0w, st, bc, model, cl, ph, s, dt, h, lo, hi, app, blk, flagged):
     """Activate every member of block blk not active that an active one touches (its
     deviation is exactly zero until now) and give it its forces at this sub-step; repeat
     for the members those touch. ``flagged``: how many members the force pass listed in
     cs.flagged (_forces, _sweep), or -1: look through the block's members (a pass cut
-    between threads). ``ordered``: a swept block (_sweep_order), whose needs take in each
-    row given here. Returns the (possibly grown) set and how many were woken."""
+    between threads). Returns the (possibly grown) set and how many were woken."""
     box, per = cl.grid.box, cl.grid.periodic
     d2 = model.diameter * model.diameter
     q_lo = 0
@@ -2257,9 +2183,6 @@ def _wake_up(cs, x0w, st, bc, model, cl, ph, s, dt, h, lo, hi, app, blk, flagged
                 continue
             if cs.has_row[b] == 0:
                 cs = _give_row(cs, b, x0w, st, cl, bc, ph)
-                if ordered:
-                    cs.needs[b] = cs.drift_place[b] if lo <= b < hi else -1
-                    _row_needs(as_tuple(cs, SubstepSet), b, lo, hi, blk)
             cs.active[b] = 0
             _activate(as_tuple(cs, SubstepSet), b, s, dt)
         v, sv, bv = as_tuple(cs, SubstepSet), as_tuple(st, GrainState), as_tuple(bc, BedContext)
@@ -2320,8 +2243,7 @@ def _run_block(cs, cand, c0, c1, lo, hi, blk, x0w, st, bc, model, cl, ph, dt, n_
     """All sub-steps of one block: members lo..hi-1, candidates cand[c0:c1]; members
     appended while it runs (woken grains' neighbours) belong to it. With ``lanes`` > 1
     each part of a sub-step runs over the members in parallel (_substep_part); joins and
-    wake-ups stay serial. On one thread each sub-step is one _sweep, ordered (_sweep_order)
-    when the block has at least ph.sweep[0] members ("One sweep"). Returns the set, the
+    wake-ups stay serial; on one thread each sub-step is one _sweep. Returns the set, the
     grain-sub-steps done and the grains woken."""
     h = dt / n_sub
     app = cs.n[0]
@@ -2334,12 +2256,9 @@ def _run_block(cs, cand, c0, c1, lo, hi, blk, x0w, st, bc, model, cl, ph, dt, n_
     woken = 0
     per_lane = np.zeros(max(lanes, 1), np.int64)  # each lane's count (_substep_part)
     first = np.int64(0)  # not the literal 0: that would compile the kernels once more
-    ordered = _swept(ph, hi - lo, lanes)
     # the sub-step kernels read tuples (grains/refs.as_tuple); the set's view is made
     # again whenever a wake-up may have grown the set
     v, sv, bv = as_tuple(cs, SubstepSet), as_tuple(st, GrainState), as_tuple(bc, BedContext)
-    if ordered:
-        _sweep_order(v, lo, hi, app, blk, ph.sweep[1])
     # set-up: forces at s = 0 of the grains in contact now, without advancing the
     # tangential springs (their state is that of the previous step's last sub-step)
     ptr, joined = _join(v, cand, c0, c1, 0.0, 0.0, dt)
@@ -2347,7 +2266,7 @@ def _run_block(cs, cand, c0, c1, lo, hi, blk, x0w, st, bc, model, cl, ph, dt, n_
     _positions(v, 0.0, dt, lo, hi, app, first, _block_size(v, lo, hi, app))
     n_woke = _forces(v, sv, bv, model, 0.0, dt, h, lo, hi, app, blk, first, _block_size(v, lo, hi, app))
     if n_woke > 0:
-        cs, k_w = _wake_up(cs, x0w, st, bc, model, cl, ph, 0.0, dt, h, lo, hi, app, blk, n_woke, ordered)
+        cs, k_w = _wake_up(cs, x0w, st, bc, model, cl, ph, 0.0, dt, h, lo, hi, app, blk, n_woke)
         n_act += k_w
         woken += k_w
         v = as_tuple(cs, SubstepSet)
@@ -2366,12 +2285,11 @@ def _run_block(cs, cand, c0, c1, lo, hi, blk, x0w, st, bc, model, cl, ph, dt, n_
             n_woke = _substep_part(np.int64(FORCES), cs, st, bc, model, s_next, dt, h, lo, hi, app, blk,
                                    lanes, per_lane, wide2)
         else:
-            n_woke, left = _sweep(v, sv, bv, model, s_next, dt, h, lo, hi, app, blk, k > 0, backoff, wide2, ordered,
-                                 ph.sweep[2])
+            n_woke, left = _sweep(v, sv, bv, model, s_next, dt, h, lo, hi, app, blk, k > 0, backoff, wide2)
             cs.retired[0] += left
         if n_woke > 0:
             cs, k_w = _wake_up(cs, x0w, st, bc, model, cl, ph, s_next, dt, h, lo, hi, app, blk,
-                               n_woke if lanes == 1 else -1, ordered)
+                               n_woke if lanes == 1 else -1)
             n_act += k_w
             woken += k_w
             v = as_tuple(cs, SubstepSet)
@@ -2381,13 +2299,6 @@ def _run_block(cs, cand, c0, c1, lo, hi, blk, x0w, st, bc, model, cl, ph, dt, n_
     else:
         _kick(v, model, h, lo, hi, app, first, _block_size(v, lo, hi, app))
     return cs, done, woken
-
-
-@njit(cache=True, no_cfunc_wrapper=True, inline="always")
-def _swept(ph, members, lanes):
-    """Whether a block of ``members`` (its gathered ones) run on ``lanes`` threads is
-    sub-stepped in ordered sweeps ("One sweep")."""
-    return lanes == 1 and members >= ph.sweep[0]
 
 
 @njit(cache=True, no_cfunc_wrapper=True, inline="always")
