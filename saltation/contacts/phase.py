@@ -275,7 +275,11 @@ the sub-steps took 5.00–5.54 µs per grain-step against 3.85–4.04, and the c
 alone (drift, then forces) 4.46: on that machine the fusion and the lost candidates-first
 order each cost time. Not kept (git history: 41a29f6, 222cd0d); not measured on a CPU with
 a smaller cache, where the full-size sub-steps cost most (AMD EPYC znver5: 180 ns per
-grain-sub-step done against 58 in the reduced case).
+grain-sub-step done against 58 in the reduced case). One kernel per sub-step on one
+thread (_kick_drift and _forces as one _sweep, the drift and force of a member shared with
+the lanes) was as fast (4.03 / 4.21 against 4.04 / 4.03 there) but compiled the force code
+twice: the default case's first run compiled in 68.5 / 71.1 s against 54.5 / 54.9
+(benchmarks/bench_compile.py), so it went too (a3f3f99, reverted).
 
 Near pairs. A grain's row holds every list neighbour (cutoff d + skin; in the dense layer
 the skin is widened for the fast grains above it: ~21 entries per engaged grain at 3.94 %),
@@ -299,7 +303,7 @@ fails the certificate grows with the grains in it: on the paper's domain at 3.94
 grains) 34 of 100 phases were redone, at 2.07 % (52 189) 23, against none or one in the
 reduced cases. But a far pair
 fails it only if its two deviations add up to 2σ or more, so one of them reached σ. So a
-member whose |δx|² reaches σ² (less room for rounding: _wide_dev2) in its drift is
+member whose |δx|² reaches σ² (less room for rounding: _wide_dev2) in _kick_drift is
 *widened* (_widen): its row and its partners' rows in its block are put back in list
 order with every entry near, it is forced from that sub-step on (a retired one too: its
 quiet time did not look at its far partners), and each of those pairs is looked at by
@@ -322,7 +326,7 @@ Hermite (its path plus a linear δx), bounded by _chord's chord and bulge: the t
 earlier of when that course can reach the bed top (_bed_time) and when it can come within
 d of the course of a near partner that is not active (inactive or retired; _chord_touch,
 the bound by which a candidate joins). It is forced again from the first sub-step at or
-after that time (_drift_member), and only if that is at least QUIET_MIN = 2 sub-steps away
+after that time (_kick_drift), and only if that is at least QUIET_MIN = 2 sub-steps away
 does it retire at all. An active partner needs no check: it looks at the pair at every
 sub-step, and if it touches a retired member (a grain deflected into it) it wakes it as it
 wakes an inactive one (_wake_up): forced again from that sub-step. A retired member keeps
@@ -335,7 +339,7 @@ forced again) work them out from its path and deviation (_velocity_of, _spin_of:
 operations of _set_path, so the same bits). One that may not retire tries again
 RETIRE_BACKOFF = 8 sub-steps later (``ph.retire_backoff``; 0: never), as does one forced
 again when its time is up. The decisions read the partners' states, so they are made as
-the force pass goes through the members one after another; in a block cut into lanes (from
+_forces goes through the members one after another; in a block cut into lanes (from
 LANE_THREADS threads, "Blocks on several threads") no member retires.
 ``counters[RETIRED_SUBSTEPS]`` counts the retired grain-sub-steps (summary.json "timing").
 At 3.94 % (reduced sweep case, after spin-up, 200 steps, one thread): retired for the rest
@@ -352,8 +356,8 @@ Lists instead of scans. In the dense layer a block holds ~2 750 members, of whic
 forced at a sub-step, ~500 retired and the rest not sub-stepped (their ``at`` only): a
 pass that goes through every member to find the forced ones pays a test per member, and
 its branch, taken for a scattered third of them, is mispredicted often. So in a block not
-cut into lanes the drift, which goes through every member anyway, lists the active ones in
-the order it drifts them (``go``), and the forces go through that list (_sweep); they list
+cut into lanes the kick-drift pass, which goes through every member anyway, lists the active ones in
+member order (``go``), and the force pass goes through that list; the force pass lists
 the members that touched one not sub-stepped (``flagged``), and the wake-up's first round
 goes through those instead of the whole block. The same members in the same order: the
 same bits, and the same retirements. At 3.94 % (as above, old and new alternated) the
@@ -595,8 +599,8 @@ class SubstepSet(NamedTuple):
     at: np.ndarray  # (C, 3) every member's position at the sub-step being evaluated (_at)
     image: np.ndarray  # (R, 3) periodic-image shift of row entry k for the step (_set_row; x is unwrapped: whole laps)
     retry: np.ndarray  # (C,) step fraction from which an active member may try to retire; a retired one is forced again
-    flagged: np.ndarray  # (C,) int64 scratch: members that touched one not active, in the force pass's order
-    go: np.ndarray  # (C,) int64 scratch: the active members of the sub-step, in drift order (_sweep)
+    flagged: np.ndarray  # (C,) int64 scratch: members that touched one not active, in _forces' order
+    go: np.ndarray  # (C,) int64 scratch: the active members of the sub-step, in member order (_kick_drift)
     retired: np.ndarray  # (1,) int64 grain-sub-steps of the block's members while retired
     widened: np.ndarray  # (1,) int64 members whose deviation reached the near filter's slack (_widen)
 
@@ -1293,36 +1297,43 @@ def _block_size(cs, lo, hi, app):
     return hi - lo + cs.n[0] - app
 
 
-@njit(cache=True, no_cfunc_wrapper=True, inline="always", error_model="numpy", _nrt=False)
-def _force_member(cs, st, bc, model, a, s, dt, h, update, blk):
-    """Force and torque on active member a at s: its pairs and the bed spheres it touches.
-    Each member's force is its own sum over its own row (both grains of a pair compute it),
-    and it writes only its own fields and row: members can be done in any order. At s = 0
-    (the set-up) the tangential springs and contact records are not advanced: they hold
-    the previous step's last sub-step. (``update`` is a run-time value, not a compile-time
-    one: one compiled copy of the force code serves both.)"""
-    _grain_force(a, cs, model, s, dt, h, update, blk)
-    _bed_force(a, cs, st, bc, s, dt, h, update)
-
-
 @njit(cache=True, no_cfunc_wrapper=True, error_model="numpy", _nrt=False)
-def _forces(cs, st, bc, model, s, dt, h, lo, hi, app, blk, t0, t1):
-    """Forces on the active members t0..t1-1 of block blk (_block_member) at s
-    (_force_member): the set-up at s = 0, a woken member, a lane. No member retires here
-    (_sweep does that). The members that touched one not active are listed in
-    cs.flagged[t0:], in this order; returns how many (to be woken)."""
+def _forces(cs, st, bc, model, s, dt, h, lo, hi, app, blk, t0, t1, backoff, listed):
+    """Forces on the active members t0..t1-1 of block blk (_block_member; ``listed``: those
+    of cs.go, the active ones _kick_drift listed) at s; returns
+    how many touched a member that was not active (to be woken). At s = 0 (the set-up)
+    the tangential springs and contact records are not advanced: they hold the previous
+    step's last sub-step. (``update`` is a run-time value, not a compile-time one: one
+    compiled copy of the force code serves both.) Each member's force is its own sum over
+    its own row (both grains of a pair compute it): members can be done in any order.
+    The members that touched one not active are listed in cs.flagged[t0:], in this order.
+    ``backoff`` > 0: then a member that touches nothing retires until it may touch
+    something unforced (_quiet_until, which needs the members one after another: which
+    ones retire depends on their order, the result does not), or tries again ``backoff``
+    sub-steps on.
+    Returns how many were woken and the sub-steps the retired members have left."""
     update = s > 0.0
     woke = 0
+    left = 0
     active = cs.active
     for t in range(t0, t1):
-        a = _block_member(t, lo, hi, app)
+        a = cs.go[t] if listed else _block_member(t, lo, hi, app)  # the same members, in the same order
         if active[a] != ACTIVE:
             continue
-        _force_member(cs, st, bc, model, a, s, dt, h, update, blk)
+        _grain_force(a, cs, model, s, dt, h, update, blk)
+        _bed_force(a, cs, st, bc, s, dt, h, update)
         if cs.wake[a] != 0:
             cs.flagged[t0 + woke] = a  # for _wake_up; each range t0..t1-1 writes its own part
             woke += 1
-    return woke
+        if backoff > 0.0 and update and s < 1.0 and s >= cs.retry[a] and cs.n_touch[a] == 0:
+            until = _quiet_until(cs, a, s, dt, h, model.diameter, blk)
+            if until > s:
+                active[a] = RETIRED
+                cs.retry[a] = until  # forced again from the first sub-step at or after it
+                left += _substeps_left(s, dt, h)
+            else:
+                cs.retry[a] = _next_try(s, dt, h, backoff)
+    return woke, left
 
 
 @njit(cache=True, no_cfunc_wrapper=True, inline="always")
@@ -1416,105 +1427,58 @@ def _half_kick(dev, ft, a, h, inv_m, inv_i):
         dev[a, 6 + c] += 0.5 * h * ft[a, 3 + c] * inv_i
 
 
-@njit(cache=True, no_cfunc_wrapper=True, inline="always", error_model="numpy", _nrt=False)
-def _drift_member(cs, a, s_next, dt, h, inv_m, inv_i, kick_first, in_lane, backoff, wide2):
-    """First half of a sub-step for member a: half kick and drift if active, its position
-    ``at`` at s_next in any case. ``kick_first``: the previous sub-step's second half kick
-    first (the operations of _kick, in its order; a member that joined since has zero
-    force, so that kick adds exactly zero). A retired member whose quiet time ends by
-    s_next is forced again (it may try to retire again ``backoff`` sub-steps on). A member
-    whose |δx|² reaches ``wide2`` (the near filter's slack; inf: never) has its and its
-    partners' rows widened (_widen) and is forced at s_next, retired or not; in a lane
-    (``in_lane``: rows are shared between lanes) it is widened by _substep_part once
-    every lane has drifted (nothing reads a row before the forces): returns True then."""
-    active, dev, ft, dev_max = cs.active, cs.dev, cs.ft, cs.dev_max
-    if active[a] == 0:
-        _at(cs, a, s_next, dt)
-        return False
-    later = False
-    if active[a] == ACTIVE:  # a retired member's force is +0: its kicks would add exactly nothing
-        if kick_first:
-            _half_kick(dev, ft, a, h, inv_m, inv_i)
-        _half_kick(dev, ft, a, h, inv_m, inv_i)
-    for c in range(3):
-        dev[a, c] += h * dev[a, 3 + c]
-    dd = dev[a, 0] ** 2 + dev[a, 1] ** 2 + dev[a, 2] ** 2
-    if dd > dev_max[a]:
-        if dev_max[a] < wide2 and dd >= wide2:
-            if in_lane:
-                later = True  # a lane (none retires there): widened after the pass
-            else:
-                _widen(cs, a)
-                if active[a] == RETIRED:
-                    cs.retry[a] = s_next  # forced now: its quiet time did not look at its far partners
-        dev_max[a] = dd
-    if not in_lane and active[a] == RETIRED and s_next >= cs.retry[a]:
-        _force_again(cs, a, s_next, dt, h, backoff)  # its quiet time (_quiet_until) is over
-    elif active[a] == ACTIVE:
-        _set_path(cs, a, s_next, dt)
-    else:
-        _set_place(cs, a, s_next, dt)  # retired: its V and W are worked out when read
-    _at(cs, a, s_next, dt)
-    return later
-
-
 @njit(cache=True, no_cfunc_wrapper=True, error_model="numpy", _nrt=False)
-def _kick_drift(cs, model, s_next, dt, h, lo, hi, app, t0, t1, kick_first, wide2):
-    """First half of a sub-step for the members t0..t1-1 of a block in a lane
-    (_substep_part; _drift_member), in member order (sequential memory). The forces at
-    s_next follow (_forces), once every lane has drifted. The members whose deviation
-    reached ``wide2`` are listed in cs.go from place t0, to be widened once every lane
-    has drifted; returns how many."""
+def _kick_drift(cs, model, s_next, dt, h, lo, hi, app, t0, t1, kick_first, listing, backoff, wide2):
+    """First half of a sub-step for the active members t0..t1-1 of a block: half kick,
+    drift (in member order: sequential memory); the others' position ``at``. The forces at
+    s_next follow (_forces), once every member has drifted. ``kick_first``: the previous
+    sub-step's second half kick first, in the same pass (the operations of _kick, in its
+    order; a member that joined since has zero force, so that kick adds exactly zero).
+    ``listing``: also list the members forced at s_next (ACTIVE) in cs.go, in member
+    order, for _forces ("Lists instead of scans"); returns how many (else 0). A retired
+    member whose quiet time ends by s_next is forced again (it may try to retire again
+    ``backoff`` sub-steps on). A member whose |δx|² reaches ``wide2`` (the near filter's
+    slack; inf: never) has its and its partners' rows widened (_widen) and is forced at
+    s_next, retired or not; in a lane (not ``listing``: rows are shared between lanes) it
+    is listed in cs.go from place t0 instead, widened by _substep_part once every lane has
+    drifted (nothing reads a row before the forces), and the count returned."""
     inv_m = 1.0 / model.mass
     inv_i = 1.0 / model.inertia
-    go = cs.go
+    active, dev, ft, dev_max, go = cs.active, cs.dev, cs.ft, cs.dev_max, cs.go
     n_go = 0
     for t in range(t0, t1):
         a = _block_member(t, lo, hi, app)
-        if _drift_member(cs, a, s_next, dt, h, inv_m, inv_i, kick_first, True, 0.0, wide2):
-            go[t0 + n_go] = a
-            n_go += 1
+        if active[a] == 0:
+            _at(cs, a, s_next, dt)
+            continue
+        if active[a] == ACTIVE:  # a retired member's force is +0: its kicks would add exactly nothing
+            if kick_first:
+                _half_kick(dev, ft, a, h, inv_m, inv_i)
+            _half_kick(dev, ft, a, h, inv_m, inv_i)
+        for c in range(3):
+            dev[a, c] += h * dev[a, 3 + c]
+        dd = dev[a, 0] ** 2 + dev[a, 1] ** 2 + dev[a, 2] ** 2
+        if dd > dev_max[a]:
+            if dev_max[a] < wide2 and dd >= wide2:
+                if listing:
+                    _widen(cs, a)
+                    if active[a] == RETIRED:
+                        cs.retry[a] = s_next  # forced now: its quiet time did not look at its far partners
+                else:
+                    go[t0 + n_go] = a  # a lane (none retires there): widened after the pass
+                    n_go += 1
+            dev_max[a] = dd
+        if listing and active[a] == RETIRED and s_next >= cs.retry[a]:
+            _force_again(cs, a, s_next, dt, h, backoff)  # its quiet time (_quiet_until) is over
+        elif active[a] == ACTIVE:
+            _set_path(cs, a, s_next, dt)
+        else:
+            _set_place(cs, a, s_next, dt)  # retired: its V and W are worked out when read
+        _at(cs, a, s_next, dt)
+        if listing:
+            go[n_go] = a
+            n_go += active[a] == ACTIVE
     return n_go
-
-
-@njit(cache=True, no_cfunc_wrapper=True, error_model="numpy", _nrt=False)
-def _sweep(cs, st, bc, model, s_next, dt, h, lo, hi, app, blk, kick_first, backoff, wide2):
-    """One sub-step of a block on one thread, to s_next: every member drifted
-    (_drift_member) in member order (sequential memory), listing the active ones in cs.go
-    ("Lists instead of scans"), then the forces on those (_force_member), once every member
-    has drifted. The members that touched one not active are listed in cs.flagged, in
-    this order. ``backoff`` > 0: a member that touches nothing retires until it may touch
-    something unforced (_quiet_until, which needs the members one after another: which
-    ones retire depends on their order, the result does not), or tries again ``backoff``
-    sub-steps on. Returns how many were woken and the sub-steps the retired members have
-    left."""
-    inv_m = 1.0 / model.mass
-    inv_i = 1.0 / model.inertia
-    update = s_next > 0.0
-    active, go = cs.active, cs.go
-    n_go = 0
-    for t in range(_block_size(cs, lo, hi, app)):
-        a = _block_member(t, lo, hi, app)
-        _drift_member(cs, a, s_next, dt, h, inv_m, inv_i, kick_first, False, backoff, wide2)
-        go[n_go] = a
-        n_go += active[a] == ACTIVE
-    woke = 0
-    left = 0
-    for f in range(n_go):
-        a = go[f]
-        _force_member(cs, st, bc, model, a, s_next, dt, h, update, blk)
-        if cs.wake[a] != 0:
-            cs.flagged[woke] = a  # for _wake_up
-            woke += 1
-        if backoff > 0.0 and update and s_next < 1.0 and s_next >= cs.retry[a] and cs.n_touch[a] == 0:
-            until = _quiet_until(cs, a, s_next, dt, h, model.diameter, blk)
-            if until > s_next:
-                active[a] = RETIRED
-                cs.retry[a] = until  # forced again from the first sub-step at or after it
-                left += _substeps_left(s_next, dt, h)
-            else:
-                cs.retry[a] = _next_try(s_next, dt, h, backoff)
-    return woke, left
 
 
 @njit(cache=True, no_cfunc_wrapper=True, inline="always", error_model="numpy", _nrt=False)
@@ -1941,13 +1905,13 @@ def _lane_start(q, m, lanes):
 def _candidates_first(new, mstart, gid, start, threads, ph):
     """``new`` (member in cell order → set index) with each block renumbered: its
     candidates first, then its other members (list neighbours only; two in three of a
-    dense block's members, which the sub-steps only place: _drift_member), each group in
-    its old order. The sub-stepped members are then near in memory. A block cut into lanes
+    dense block's members, which the sub-steps only place: _kick_drift), each group in its
+    old order. The sub-stepped members are then near in memory. A block cut into lanes
     (_substep_part) is renumbered so within each lane's range, as cut for the gathered
     members: the lanes keep their members (with the candidates first in the whole block,
     one lane would get nearly all the work). The blocks' ranges and the result are
-    unchanged (the members may be done in any order: _force_member); which members retire
-    is not (_quiet_until)."""
+    unchanged (the members may be done in any order: _forces); which members retire is not
+    (_quiet_until)."""
     m = new.shape[0]
     inv = np.empty(m, np.int64)
     for p in range(m):
@@ -2132,9 +2096,10 @@ def _give_row(cs, a, x0w, st, cl, bc, ph):
 def _wake_up(cs, x0w, st, bc, model, cl, ph, s, dt, h, lo, hi, app, blk, flagged):
     """Activate every member of block blk not active that an active one touches (its
     deviation is exactly zero until now) and give it its forces at this sub-step; repeat
-    for the members those touch. ``flagged``: how many members the force pass listed in
-    cs.flagged (_forces, _sweep), or -1: look through the block's members (a pass cut
-    between threads). Returns the (possibly grown) set and how many were woken."""
+    for the members those touch. ``flagged``: how many members _forces listed in
+    cs.flagged (one pass over the block, in its order), or -1: look through the block's
+    members (a pass cut between threads). Returns the (possibly grown) set and how many
+    were woken."""
     box, per = cl.grid.box, cl.grid.periodic
     d2 = model.diameter * model.diameter
     q_lo = 0
@@ -2191,9 +2156,10 @@ def _wake_up(cs, x0w, st, bc, model, cl, ph, s, dt, h, lo, hi, app, blk, flagged
         _positions(v, s, dt, n_before, v.n[0], v.n[0], np.int64(0), v.n[0] - n_before)
         for t in range(q_hi, q_new):
             # b alone (as members b..b and none appended): the compiled _forces, not a
-            # third inlined copy of the force code (wake-ups are rare)
+            # second inlined copy of the force code (wake-ups are rare). Its flags are
+            # run-time values (s < 0: False): a literal True or False would compile it once more
             b = v.queue[t]
-            _forces(v, sv, bv, model, s, dt, h, b, b + 1, v.n[0], blk, np.int64(0), np.int64(1))
+            _forces(v, sv, bv, model, s, dt, h, b, b + 1, v.n[0], blk, np.int64(0), np.int64(1), 0.0, s < 0.0)
         q_lo = q_hi
         q_hi = q_new
     return cs, q_hi - recalled
@@ -2221,10 +2187,12 @@ def _substep_part(part, cs, st, bc, model, s, dt, h, lo, hi, app, blk, lanes, pe
         t1 = _lane_start(q + 1, m, lanes)
         v = as_tuple(cs, SubstepSet)  # the hot loops read tuples (grains/refs.py)
         if part == KICK_DRIFT or part == KICK_KICK_DRIFT:
-            per_lane[q] = _kick_drift(v, model, s, dt, h, lo, hi, app, t0, t1, part == KICK_KICK_DRIFT, wide2)
+            # the flags as run-time values (part < 0: False), as in _run_block
+            per_lane[q] = _kick_drift(v, model, s, dt, h, lo, hi, app, t0, t1, part == KICK_KICK_DRIFT, part < 0,
+                                      0.0, wide2)
         elif part == FORCES:
             per_lane[q] = _forces(v, as_tuple(st, GrainState), as_tuple(bc, BedContext), model, s, dt, h,
-                                  lo, hi, app, blk, t0, t1)
+                                  lo, hi, app, blk, t0, t1, 0.0, part < 0)[0]
         else:
             _kick(v, model, h, lo, hi, app, t0, t1)
     if part == FORCES:
@@ -2243,8 +2211,7 @@ def _run_block(cs, cand, c0, c1, lo, hi, blk, x0w, st, bc, model, cl, ph, dt, n_
     """All sub-steps of one block: members lo..hi-1, candidates cand[c0:c1]; members
     appended while it runs (woken grains' neighbours) belong to it. With ``lanes`` > 1
     each part of a sub-step runs over the members in parallel (_substep_part); joins and
-    wake-ups stay serial; on one thread each sub-step is one _sweep. Returns the set, the
-    grain-sub-steps done and the grains woken."""
+    wake-ups stay serial. Returns the set, the grain-sub-steps done and the grains woken."""
     h = dt / n_sub
     app = cs.n[0]
     backoff = ph.retire_backoff[0]
@@ -2256,6 +2223,7 @@ def _run_block(cs, cand, c0, c1, lo, hi, blk, x0w, st, bc, model, cl, ph, dt, n_
     woken = 0
     per_lane = np.zeros(max(lanes, 1), np.int64)  # each lane's count (_substep_part)
     first = np.int64(0)  # not the literal 0: that would compile the kernels once more
+    listed, scanned = first == 0, first != 0  # True and False, likewise not literals
     # the sub-step kernels read tuples (grains/refs.as_tuple); the set's view is made
     # again whenever a wake-up may have grown the set
     v, sv, bv = as_tuple(cs, SubstepSet), as_tuple(st, GrainState), as_tuple(bc, BedContext)
@@ -2264,7 +2232,8 @@ def _run_block(cs, cand, c0, c1, lo, hi, blk, x0w, st, bc, model, cl, ph, dt, n_
     ptr, joined = _join(v, cand, c0, c1, 0.0, 0.0, dt)
     n_act += joined
     _positions(v, 0.0, dt, lo, hi, app, first, _block_size(v, lo, hi, app))
-    n_woke = _forces(v, sv, bv, model, 0.0, dt, h, lo, hi, app, blk, first, _block_size(v, lo, hi, app))
+    n_woke = _forces(v, sv, bv, model, 0.0, dt, h, lo, hi, app, blk, first, _block_size(v, lo, hi, app), 0.0,
+                     scanned)[0]
     if n_woke > 0:
         cs, k_w = _wake_up(cs, x0w, st, bc, model, cl, ph, 0.0, dt, h, lo, hi, app, blk, n_woke)
         n_act += k_w
@@ -2285,7 +2254,9 @@ def _run_block(cs, cand, c0, c1, lo, hi, blk, x0w, st, bc, model, cl, ph, dt, n_
             n_woke = _substep_part(np.int64(FORCES), cs, st, bc, model, s_next, dt, h, lo, hi, app, blk,
                                    lanes, per_lane, wide2)
         else:
-            n_woke, left = _sweep(v, sv, bv, model, s_next, dt, h, lo, hi, app, blk, k > 0, backoff, wide2)
+            m = _block_size(v, lo, hi, app)
+            n_go = _kick_drift(v, model, s_next, dt, h, lo, hi, app, first, m, k > 0, listed, backoff, wide2)
+            n_woke, left = _forces(v, sv, bv, model, s_next, dt, h, lo, hi, app, blk, first, n_go, backoff, listed)
             cs.retired[0] += left
         if n_woke > 0:
             cs, k_w = _wake_up(cs, x0w, st, bc, model, cl, ph, s_next, dt, h, lo, hi, app, blk,
