@@ -218,8 +218,8 @@ def test_each_block_and_lane_is_numbered_candidates_first():
 
 def test_a_pair_many_box_lengths_apart_unwrapped_touches_as_in_the_box():
     """Positions along a periodic axis are unwrapped (a saltating grain laps the box a few
-    hundred times in 200 s more than one resting on the bed): a pair's periodic image for
-    the step (SubstepSet.image, in box lengths) must hold that many laps. Grain 0 is 300
+    hundred times in 200 s more than one resting on the bed): a pair's periodic shift for
+    the step (SubstepSet.image, cells.image_shift) must hold that many laps. Grain 0 is 300
     box lengths downstream of where it is in the reference run; grain 1 runs into it. The
     same collision, the same velocities after it (to the rounding of the larger x)."""
     pos = np.array([[5.0, 3.0, 5.0], [5.0 - 1.05, 3.0, 5.0]])
