@@ -4,6 +4,7 @@ compiled code, named.
     python benchmarks/profile_perf.py [--concentration 3.94] [--tau-ratio 1.79]
         [--spinup 1.0] [--steps 200] [--frequency 4000] [--top 25] [--keep DIR]
         [--cases cases/concentration_sweep_reduced.toml] [--spinup-states DIR]
+        [--annotate NAME ... [--lines 40]]
 
 Builds the reduced sweep case at that concentration (cases/concentration_sweep_reduced.toml,
 as benchmarks/bench_dense.py), spins it up (default 1 s: the dense near-bed layer forms
@@ -18,7 +19,11 @@ symbol of their own (``unnamed``: the rest). The table gives each function's sha
 samples taken in compiled code, and the share of all samples that were compiled code.
 ``--cases cases/concentration_sweep.toml`` profiles the paper's domain instead, and
 ``--spinup-states DIR`` loads a spin-up that ``bench_dense.py --spinup-states DIR`` saved
-(the paper's domain takes ~1 h at 3.94 %) or saves its own there.
+(the paper's domain takes ~1 h at 3.94 %) or saves its own there. ``--annotate NAME``
+(e.g. ``contacts.phase._run_block``) adds the samples of that function instruction by
+instruction: its machine code disassembled from the object code (``objdump``) with each
+instruction's share of the function's samples, the hottest ``--lines`` with the code
+around them (a sample is charged to the instruction after the one that stalled).
 
 It compiles everything afresh in a temporary NUMBA_CACHE_DIR (a library loaded from the
 cache has no object code to read symbols from), which takes a minute or two before the
@@ -56,11 +61,11 @@ def _short(symbol: str) -> str:
     return (name.removeprefix("saltation.") + (".wrapper" if symbol.startswith("_ZN7cpython") else "")) or symbol
 
 
-def _library_symbols(lib, path: Path, owner: str) -> list[tuple[int, int, str]]:
-    """(address, size, name) of every function in a compiled library, located from its
-    object code's symbol table and the address of one of them; [] for a library loaded
-    from the cache (no object code). A parallel loop's gufunc is named after ``owner``,
-    the kernel whose library links it."""
+def _library_symbols(lib, path: Path, owner: str) -> list[tuple[int, int, str, str, int]]:
+    """(address, size, name, object file, offset in it) of every function in a compiled
+    library, located from its object code's symbol table and the address of one of them;
+    [] for a library loaded from the cache (no object code). A parallel loop's gufunc is
+    named after ``owner``, the kernel whose library links it."""
     try:
         code = lib._get_compiled_object()  # only after a fresh compile (module docstring)
     except Exception:  # noqa: BLE001 - loaded from a cache: nothing to read
@@ -79,14 +84,14 @@ def _library_symbols(lib, path: Path, owner: str) -> list[tuple[int, int, str]]:
         except Exception:  # noqa: BLE001 - not an exported function
             continue
         if base > 0:
-            return [(base + o, size, f"{owner}.parallel_loop" if "numba_parfor_gufunc" in n else _short(n))
-                    for n, (o, size) in symbols.items()]
+            return [(base + o, size, f"{owner}.parallel_loop" if "numba_parfor_gufunc" in n else _short(n),
+                     str(path), o) for n, (o, size) in symbols.items()]
     return []
 
 
-def write_perf_map(package, out_dir: Path) -> int:
+def write_perf_map(package, out_dir: Path) -> list[tuple[int, int, str, str, int]]:
     """/tmp/perf-<pid>.map for every compiled library of ``package``'s dispatchers; returns
-    the number of functions named. Object code is kept under ``out_dir``."""
+    the functions named (_library_symbols). Object code is kept under ``out_dir``."""
     import importlib
     import pkgutil
 
@@ -112,10 +117,50 @@ def write_perf_map(package, out_dir: Path) -> int:
                         continue
                     seen.add(id(lib))
                     entries += _library_symbols(lib, out_dir / f"lib{len(seen)}.o", owner)
+    entries = sorted(set(entries))
     with open(f"/tmp/perf-{os.getpid()}.map", "w") as fh:
-        for addr, size, name in sorted(set(entries)):
+        for addr, size, name, _, _ in entries:
             fh.write(f"{addr:x} {size:x} {name}\n")
-    return len(entries)
+    return entries
+
+
+def annotate(perf_data: Path, entries, name: str, lines: int) -> None:
+    """Samples of the compiled function ``name`` instruction by instruction (module
+    docstring, --annotate): the hottest ``lines`` instructions with the code around them."""
+    fns = [e for e in entries if e[2] == name]
+    if not fns:
+        near = sorted({e[2] for e in entries if name.split(".")[-1] in e[2]})
+        raise SystemExit(f"profile_perf: no compiled function {name!r}; similar: {near[:10]}")
+    report = subprocess.run(["perf", "script", "-i", str(perf_data), "-F", "ip"], capture_output=True,
+                            text=True).stdout
+    ips = [int(line, 16) for line in report.split()]
+
+    def samples(fn):
+        return collections.Counter(ip - fn[0] + fn[4] for ip in ips if fn[0] <= ip < fn[0] + fn[1])
+
+    # the copy with the most samples (parallel loops of one kernel share its name)
+    addr, size, _, obj, off = max(fns, key=lambda fn: sum(samples(fn).values()))
+    hits = samples((addr, size, name, obj, off))
+    asm = subprocess.run(["objdump", "-d", "--no-show-raw-insn", f"--start-address={off}",
+                          f"--stop-address={off + size}", obj], capture_output=True, text=True).stdout
+    code = []
+    for text in asm.splitlines():
+        m = re.match(r"\s*([0-9a-f]+):\s*(.*)", text)
+        if m:  # jump targets as offsets: the symbols spell out every argument's type
+            code.append((int(m.group(1), 16), re.sub(r"<[^>]*?(\+0x[0-9a-f]+)?>", r"<\1>", m.group(2).strip())))
+    total = sum(hits.values())
+    print(f"\n{name}: {size} bytes, {len(code)} instructions, {total} samples; hottest {lines} "
+          f"(share of the function's samples) with the instructions before them")
+    index = {a: k for k, (a, _) in enumerate(code)}
+    shown = set()
+    for a, _ in hits.most_common(lines):
+        if a not in index or a in shown:
+            continue
+        print("    ...")
+        for b, text in code[max(0, index[a] - 6):index[a] + 2]:
+            shown.add(b)
+            mark = f"{100 * hits[b] / total:5.1f}%" if hits[b] else "      "
+            print(f"  {mark} {b - off:6x}  {text}")
 
 
 def shares(perf_data: Path, perf_map: str) -> tuple[dict[str, int], int]:
@@ -146,6 +191,10 @@ def main():
     ap.add_argument("--cases", default=None, help="sweep file of the case (default the reduced sweep)")
     ap.add_argument("--spinup-states", default=None, metavar="DIR",
                     help="load the spun-up state from here (bench_dense.py --spinup-states), or save it here")
+    ap.add_argument("--annotate", action="append", default=[], metavar="NAME",
+                    help="samples of this compiled function by instruction (e.g. contacts.phase._forces); "
+                         "may be given more than once")
+    ap.add_argument("--lines", type=int, default=40, help="hottest instructions --annotate shows")
     args = ap.parse_args()
     for tool in ("perf", "nm"):
         if shutil.which(tool) is None:
@@ -204,7 +253,8 @@ def main():
     wall = time.perf_counter() - t0
     rec.send_signal(signal.SIGINT)
     rec.wait()
-    named = write_perf_map(saltation, work)
+    entries = write_perf_map(saltation, work)
+    named = len(entries)
     counts, total = shares(data, f"perf-{os.getpid()}.map")
     jit = sum(counts.values())
     print(f"\n{args.steps} steps of {sim.n} grains at C = {args.concentration} %, one thread: {wall:.1f} s, "
@@ -213,6 +263,8 @@ def main():
     print(f"{'share':>6}  function (of the samples in compiled code)")
     for name, k in counts.most_common(args.top):
         print(f"{100 * k / max(jit, 1):5.1f}%  {name}")
+    for name in args.annotate:
+        annotate(data, entries, name, args.lines)
 
 
 if __name__ == "__main__":

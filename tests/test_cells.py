@@ -39,7 +39,7 @@ def configurations(draw):
     rng = np.random.default_rng(seed)
     box_a = np.array(box)
     pos = rng.uniform(0.0, 1.0, (n, 3)) * box_a
-    kind = rng.integers(0, 6, (n, 3))
+    kind = rng.integers(0, 7, (n, 3))
     for a in range(3):
         length = box_a[a]
         edge = rng.uniform(0.0, 0.6, n)
@@ -47,9 +47,11 @@ def configurations(draw):
         pos[kind[:, a] == 2, a] = length - edge[kind[:, a] == 2]  # near the high face
         pos[kind[:, a] == 3, a] = rng.choice([0.0, length, np.nextafter(length, 0.0), -0.0],
                                              int((kind[:, a] == 3).sum()))
-        if periodic[a]:  # unwrapped images
+        if periodic[a]:  # unwrapped images, of points inside and of points on the faces
             shift = rng.integers(-3, 4, n) * length
             pos[kind[:, a] == 4, a] += shift[kind[:, a] == 4]
+            face = rng.choice([0.0, length], n) + shift  # 3L may wrap to -1e-15 or round to L
+            pos[kind[:, a] == 6, a] = face[kind[:, a] == 6]
         else:  # outside the bounded range: clamped into the end layers
             pos[kind[:, a] == 4, a] = rng.uniform(-2.0, length + 5.0, int((kind[:, a] == 4).sum()))
     return pos, box, periodic, cutoff
@@ -67,7 +69,31 @@ def test_no_pair_missed_across_cell_and_periodic_boundaries(config, cell):
     assert len(pairs) == len(found)  # no pair listed twice (small grids: stencil deduplicated)
     # rows in id order (the contact forces sum over them): sorted by i, then j
     assert np.array_equal(found, found[np.lexsort((found[:, 1], found[:, 0]))])
-    assert pairs == brute_force_pairs(pos, box, periodic, cutoff)
+    expected = brute_force_pairs(pos, box, periodic, cutoff)
+    assert pairs == expected
+    # every row whole, from both sides (the search measures each pair from each grain)
+    cell_of, start, count, order = allocate_cells(len(pos), grid)
+    build_cells(pos, grid, cell_of, start, count, order)
+    nbr = np.empty((len(pos), len(pos)), np.int32)
+    cnt = np.zeros(len(pos), np.int64)
+    build_neighbour_list(pos, grid, cell_of, start, count, order, cutoff, nbr, cnt)
+    for i in range(len(pos)):
+        assert set(nbr[i, :cnt[i]].tolist()) == {j for p in expected if i in p for j in p if j != i}
+
+
+def test_a_grain_wrapping_to_just_below_zero_finds_its_neighbours():
+    """x = 3L rounds to 3 box lengths and wraps to -1.8e-15 (filed in the first layer);
+    wrapping that once more gives L. The search must file it where the cells did: its row
+    was empty (seen in tests/test_contacts.py, seed 14)."""
+    box = (4.013531755356191, 3.0, 3.0)
+    pos = np.array([[4.013531755356191, 0.89613925, 0.0], [12.040595266068573, 0.47471953, 0.08840052]])
+    grid = make_grid(box, 1.0, (True, False, False))
+    cell_of, start, count, order = allocate_cells(2, grid)
+    build_cells(pos, grid, cell_of, start, count, order)
+    nbr = np.empty((2, 2), np.int32)
+    cnt = np.zeros(2, np.int64)
+    build_neighbour_list(pos, grid, cell_of, start, count, order, 1.0, nbr, cnt)
+    assert cnt.tolist() == [1, 1] and nbr[0, 0] == 1 and nbr[1, 0] == 0
 
 
 @settings(max_examples=100, deadline=None)

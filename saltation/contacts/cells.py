@@ -372,21 +372,36 @@ def image_shift(dx, length, periodic):
 
 @njit(cache=True, no_cfunc_wrapper=True, inline="always")
 def _search_layers(x, n, size, length, periodic, cutoff):
-    """The layers to search along one axis for neighbours of a grain at x, as offsets
+    """The layers to search along one axis for neighbours of a grain at x (wrapped into
+    the box on a periodic axis), as offsets
     o_lo..o_hi from its own layer k (layer k + o, taken modulo n when ``wrap``), and f, the
     grain's distance from its layer's lower face (< 0 or > size for a grain clamped into
     an end layer of a bounded axis): (k, o_lo, o_hi, wrap, prune, f). A neighbour closer
     than the cutoff is at most ceil(cutoff / size) layers away. ``prune``: the layers'
     gaps (_face_gap) bound the distance; not on a periodic axis of fewer than
     2w + 1 layers, whose layers are each searched once (o from −k to n − 1 − k)."""
-    k = axis_index(x, n, size, length, periodic)
     w = max(1, int(math.ceil(cutoff / size)))
     if periodic:
-        f = wrapped(x, length) - k * size
+        # x is already wrapped (build_neighbour_list): axis_index's layer of the unwrapped
+        # position (wrapping again is not the identity: −1e-15 would become the box length)
+        k = min(max(int(x / size), 0), n - 1)
+        f = x - k * size
         if 2 * w + 1 > n:
             return k, -k, n - 1 - k, False, False, f
         return k, -w, w, True, True, f
+    k = axis_index(x, n, size, length, periodic)
     return k, max(-w, -k), min(w, n - 1 - k), False, True, x - k * size
+
+
+@njit(cache=True, no_cfunc_wrapper=True, inline="always")
+def _wrap_shift(j, n, length):
+    """Where layer j (k + o before it is taken modulo n) wrapped: −length below the axis,
+    +length above it, 0 inside (the image of a grain filed in layer j mod n)."""
+    if j < 0:
+        return -length
+    if j >= n:
+        return length
+    return 0.0
 
 
 @njit(cache=True, no_cfunc_wrapper=True, inline="always")
@@ -420,7 +435,12 @@ def build_neighbour_list(pos, grid, cell_of, cell_start, cell_count, order, cuto
     fewer distances save: pairs.rebuild searches on cells of one cutoff (LIST_CELL).
 
     Grain by grain in cell order, in SEARCH_CHUNKS parts done in parallel, on a copy of
-    the positions in cell order: consecutive grains read the same cells. Layers farther
+    the positions in cell order, wrapped into the box on the periodic axes: consecutive
+    grains read the same cells, and a candidate's image is that of the layer it was found
+    in (the box length taken off the separation of the wrapped positions where the layers
+    wrapped: exactly antisymmetric, as min_image), so the distances need no minimum image (two np.floor per candidate: −31 % of the search at
+    3.94 %, the same list; minimum image only where an axis has too few layers to wrap,
+    which then searches each layer once). Layers farther
     from the grain than the cutoff (by the distance to their near face, _face_gap) are not
     searched, first along x, then y, then z; the z layers left of one (x, y) column are
     consecutive cells, so their grains are one run of ``order`` (two where a periodic axis
@@ -437,9 +457,14 @@ def build_neighbour_list(pos, grid, cell_of, cell_start, cell_count, order, cuto
     sorted_pos = np.empty((n, 3))
     for q in prange(n):
         i = order[q]
-        sorted_pos[q, 0] = pos[i, 0]
-        sorted_pos[q, 1] = pos[i, 1]
-        sorted_pos[q, 2] = pos[i, 2]
+        sorted_pos[q, 0] = wrapped(pos[i, 0], lx) if px else pos[i, 0]
+        sorted_pos[q, 1] = wrapped(pos[i, 1], ly) if py else pos[i, 1]
+        sorted_pos[q, 2] = wrapped(pos[i, 2], lz) if pz else pos[i, 2]
+    # an axis whose layers are each searched once (too few to wrap, _search_layers) keeps
+    # the minimum image
+    mx = px and 2 * max(1, int(math.ceil(cutoff / sx))) + 1 > nx
+    my = py and 2 * max(1, int(math.ceil(cutoff / sy))) + 1 > ny
+    mz = pz and 2 * max(1, int(math.ceil(cutoff / sz))) + 1 > nz
     size = (n + SEARCH_CHUNKS - 1) // SEARCH_CHUNKS
     for chunk in prange(SEARCH_CHUNKS):
         held = np.empty(cap, nbr.dtype)  # _sort_row's copy of a row
@@ -455,14 +480,18 @@ def build_neighbour_list(pos, grid, cell_of, cell_start, cell_count, order, cuto
                 if gx2 > lim:
                     continue
                 jx = kx + ox
+                shx = 0.0  # the candidates' image: their layer's, across the periodic face
                 if wx:
+                    shx = _wrap_shift(jx, nx, lx)
                     jx = jx % nx
                 for oy in range(ay0, ay1 + 1):
                     gxy2 = gx2 + _face_gap(fy, sy, oy, by) ** 2
                     if gxy2 > lim:
                         continue
                     jy = ky + oy
+                    shy = 0.0
                     if wy:
+                        shy = _wrap_shift(jy, ny, ly)
                         jy = jy % ny
                     # the z layers within reach: a range around kz (the gaps grow away from it)
                     z0, z1 = az0, az1
@@ -473,10 +502,13 @@ def build_neighbour_list(pos, grid, cell_of, cell_start, cell_count, order, cuto
                     row = (jx * ny + jy) * nz
                     lo, hi = kz + z0, kz + z1
                     for part in range(2):
+                        shz = 0.0
                         if wz and lo < 0:  # wraps below: the top layers first, then from 0
                             a, b = (lo + nz, nz - 1) if part == 0 else (0, hi)
+                            shz = -lz if part == 0 else 0.0
                         elif wz and hi >= nz:  # wraps above
                             a, b = (lo, nz - 1) if part == 0 else (0, hi - nz)
+                            shz = lz if part == 1 else 0.0
                         elif part == 0:
                             a, b = lo, hi
                         else:
@@ -486,9 +518,16 @@ def build_neighbour_list(pos, grid, cell_of, cell_start, cell_count, order, cuto
                         for q in range(q0, q1):
                             if q == qi:
                                 continue
-                            dx = min_image(xi - sorted_pos[q, 0], lx, px)
-                            dy = min_image(yi - sorted_pos[q, 1], ly, py)
-                            dz = min_image(zi - sorted_pos[q, 2], lz, pz)
+                            # (x_i − x_j) − shift: exactly the negated value from j's side
+                            dx = (xi - sorted_pos[q, 0]) - shx
+                            dy = (yi - sorted_pos[q, 1]) - shy
+                            dz = (zi - sorted_pos[q, 2]) - shz
+                            if mx:
+                                dx = min_image(dx, lx, px)
+                            if my:
+                                dy = min_image(dy, ly, py)
+                            if mz:
+                                dz = min_image(dz, lz, pz)
                             # without a branch on the distance (a minority of candidates are
                             # neighbours, unpredictably): every candidate is written, and the
                             # next one overwrites it unless it was a neighbour (-25 %)
