@@ -438,9 +438,9 @@ def build_neighbour_list(pos, grid, cell_of, cell_start, cell_count, order, cuto
     the positions in cell order, wrapped into the box on the periodic axes: consecutive
     grains read the same cells, and a candidate's image is that of the layer it was found
     in (the box length taken off the separation of the wrapped positions where the layers
-    wrapped: exactly antisymmetric, as min_image), so the distances need no minimum image (two np.floor per candidate: −31 % of the search at
-    3.94 %, the same list; minimum image only where an axis has too few layers to wrap,
-    which then searches each layer once). Layers farther
+    wrapped: exactly antisymmetric, as min_image). So the distances need no minimum image,
+    two np.floor per candidate: the search −29 % at 3.94 %, the same list. (An axis with
+    too few layers to wrap, each searched once, keeps the minimum image.) Layers farther
     from the grain than the cutoff (by the distance to their near face, _face_gap) are not
     searched, first along x, then y, then z; the z layers left of one (x, y) column are
     consecutive cells, so their grains are one run of ``order`` (two where a periodic axis
