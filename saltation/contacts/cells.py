@@ -132,16 +132,22 @@ def wrapped(x, length):
 
 
 @njit(cache=True, no_cfunc_wrapper=True, inline="always")
+def _wrapped_layer(s, n, size):
+    """Cell layer of a coordinate s already wrapped into a periodic axis (``wrapped``).
+    Not axis_index of s: wrapping again is not the identity (−1e-15 becomes the length)."""
+    k = int(s / size)
+    if k >= n:  # s rounded up to L
+        k = n - 1
+    elif k < 0:
+        k = 0
+    return k
+
+
+@njit(cache=True, no_cfunc_wrapper=True, inline="always")
 def axis_index(x, n, size, length, periodic):
     """Cell layer of coordinate x on an axis of n cells of ``size`` (wrapped or clamped)."""
     if periodic:
-        s = wrapped(x, length)
-        k = int(s / size)
-        if k >= n:  # s rounded up to L
-            k = n - 1
-        elif k < 0:
-            k = 0
-        return k
+        return _wrapped_layer(wrapped(x, length), n, size)
     f = math.floor(x / size)
     if f < 0.0:
         return 0
@@ -382,9 +388,7 @@ def _search_layers(x, n, size, length, periodic, cutoff):
     2w + 1 layers, whose layers are each searched once (o from −k to n − 1 − k)."""
     w = max(1, int(math.ceil(cutoff / size)))
     if periodic:
-        # x is already wrapped (build_neighbour_list): axis_index's layer of the unwrapped
-        # position (wrapping again is not the identity: −1e-15 would become the box length)
-        k = min(max(int(x / size), 0), n - 1)
+        k = _wrapped_layer(x, n, size)  # x is wrapped already (build_neighbour_list)
         f = x - k * size
         if 2 * w + 1 > n:
             return k, -k, n - 1 - k, False, False, f
@@ -460,11 +464,6 @@ def build_neighbour_list(pos, grid, cell_of, cell_start, cell_count, order, cuto
         sorted_pos[q, 0] = wrapped(pos[i, 0], lx) if px else pos[i, 0]
         sorted_pos[q, 1] = wrapped(pos[i, 1], ly) if py else pos[i, 1]
         sorted_pos[q, 2] = wrapped(pos[i, 2], lz) if pz else pos[i, 2]
-    # an axis whose layers are each searched once (too few to wrap, _search_layers) keeps
-    # the minimum image
-    mx = px and 2 * max(1, int(math.ceil(cutoff / sx))) + 1 > nx
-    my = py and 2 * max(1, int(math.ceil(cutoff / sy))) + 1 > ny
-    mz = pz and 2 * max(1, int(math.ceil(cutoff / sz))) + 1 > nz
     size = (n + SEARCH_CHUNKS - 1) // SEARCH_CHUNKS
     for chunk in prange(SEARCH_CHUNKS):
         held = np.empty(cap, nbr.dtype)  # _sort_row's copy of a row
@@ -474,6 +473,9 @@ def build_neighbour_list(pos, grid, cell_of, cell_start, cell_count, order, cuto
             kx, ax0, ax1, wx, bx, fx = _search_layers(xi, nx, sx, lx, px, cutoff)
             ky, ay0, ay1, wy, by, fy = _search_layers(yi, ny, sy, ly, py, cutoff)
             kz, az0, az1, wz, bz, fz = _search_layers(zi, nz, sz, lz, pz, cutoff)
+            # a periodic axis whose layers are each searched once (too few to wrap) keeps
+            # the minimum image
+            mx, my, mz = px and not wx, py and not wy, pz and not wz
             cnt = 0
             for ox in range(ax0, ax1 + 1):
                 gx2 = _face_gap(fx, sx, ox, bx) ** 2
