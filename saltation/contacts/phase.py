@@ -1676,14 +1676,13 @@ def _chord_touch(r2, rd, dd, bulge, d):
     within d + B, the smaller root of a quadratic."""
     lim = d * (1.0 + TOUCH_EPS) + bulge
     c0 = r2 - lim * lim
-    if c0 <= 0.0:
-        return 0.0
-    if rd >= 0.0:
-        return np.inf  # the chord only moves apart
     disc = rd * rd - dd * c0
-    if disc < 0.0:
-        return np.inf
-    return c0 / (math.sqrt(disc) - rd) * (1.0 - TOUCH_EPS)  # the smaller root, cancellation-free
+    # the smaller root, cancellation-free; worked out whatever the case and then chosen
+    # (selects, not branches: in the dense layer which case holds is a coin toss per pair)
+    root = c0 / (math.sqrt(max(disc, 0.0)) - rd) * (1.0 - TOUCH_EPS)
+    apart = (rd >= 0.0) | (disc < 0.0)  # the chord only moves apart, or passes by
+    later = np.inf if apart else root
+    return 0.0 if c0 <= 0.0 else later
 
 
 @njit(cache=True, no_cfunc_wrapper=True, inline="always")

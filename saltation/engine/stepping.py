@@ -129,17 +129,20 @@ def _bed_pass(st, w, t, dt, step, bed, virtual, packed, pb, last_contact, top, s
 
 @njit(cache=True, no_cfunc_wrapper=True)
 def advance_split(f, coef, bed, virtual, packed, st, w, hc, t0, dt, n_steps, top, step0, soft, hard, model, cl, ph,
-                  bc, scratch, pb, last_contact, timers):
+                  bc, scratch, pb, last_contact, timers, cs):
     """Advance all grains n_steps from t0 (global step index step0): free flight →
-    contacts → bed each step (module docstring). Stops early, like tests/peers/sphere_advance.advance,
-    when a grain is not finite or a jump buffer is full. Returns (steps done, the
-    ContactList to keep). The contact model is ``soft`` (SoftContacts), ``hard``
-    (HardContacts) or neither (both None: grains pass through each other); the bed is
-    ``virtual`` (VirtualBed) or ``packed`` (PackedBedPass), the other None. Each
-    combination is its own compiled step (the branches on None are pruned)."""
+    contacts → bed each step (module docstring). Stops early, like
+    tests/peers/sphere_advance.advance, when a grain is not finite or a jump buffer is full.
+    Returns (steps done, the ContactList to keep, the contact phase's SubstepSet to pass as
+    ``cs`` next time). The set is scratch that keeps its size from call to call: a run
+    advanced in short chunks (the variance samples end one every step or two) does not grow
+    it afresh, page faults and all, at each chunk's first step. The contact model is
+    ``soft`` (SoftContacts), ``hard`` (HardContacts) or neither (both None: grains pass
+    through each other); the bed is ``virtual`` (VirtualBed) or ``packed``
+    (PackedBedPass), the other None. Each combination is its own compiled step (the
+    branches on None are pruned)."""
     n = st.pos.shape[0]
     cap = st.jump_buf.shape[1]
-    cs = empty_substep_set()  # the contact phase's compact set, reused from step to step
     skip = ph.active[:0]  # grains whose bed the contact phase resolved: none ...
     if soft is not None:
         skip = ph.active  # ... or the sub-stepped ones
@@ -171,8 +174,8 @@ def advance_split(f, coef, bed, virtual, packed, st, w, hc, t0, dt, n_steps, top
                 stop = True
                 break
         if stop:
-            return s + 1, cl
-    return n_steps, cl
+            return s + 1, cl, cs
+    return n_steps, cl, cs
 
 
 def default_skin(dt_particle: float) -> float:
@@ -227,6 +230,7 @@ class Stepper:
                                    self.last_contact if self.contacts_mode == CONTACTS_SOFT else self.last_contact[:0],
                                    float(bed[BED_MIN_JUMP_DURATION]), float(bed[BED_MIN_JUMP_HEIGHT]))
         self.timers = np.zeros(3)
+        self.cs = empty_substep_set()  # the contact phase's compact set, kept from chunk to chunk (advance_split)
         self.pp_collisions_hard = 0
 
     def start(self, pos):
@@ -249,11 +253,11 @@ class Stepper:
             soft = soft._replace(threads=int(numba.get_num_threads()))
         return (f, self.coef, self.bed, self.virtual, self.packed, st, ws, self.hist_coef, float(t0), self.dt,
                 int(n_steps), self.top_d, int(step0), soft, self.hard, self.model, self.cl, self.ph, self.bc,
-                self.scratch, self.pb, self.last_contact, self.timers)
+                self.scratch, self.pb, self.last_contact, self.timers, self.cs)
 
     def advance(self, f, st, ws, t0: float, n_steps: int, step0: int) -> int:
         """n_steps steps from t0 (global step index step0); returns the steps done."""
-        done, self.cl = advance_split(*self._step_args(f, st, ws, t0, n_steps, step0))
+        done, self.cl, self.cs = advance_split(*self._step_args(f, st, ws, t0, n_steps, step0))
         return int(done)
 
     def precompile(self, f, st, ws) -> None:
