@@ -4,6 +4,7 @@ never put a contact of the free-flight paths before the time they return (that w
 lose a contact or change the bits), and they should be tight (that is their point: issue
 19's dense cases). Checked on random cubic Hermite paths sampled finely."""
 import numpy as np
+from numba import njit
 
 from saltation.contacts.phase import _first_bed, _first_touch, _hermite, _path_gap
 
@@ -103,6 +104,26 @@ def test_across_the_periodic_boundary():
     xj0 = np.array([39.1, 3.0, 5.0])  # 1.1 apart, closing at 20 u*: touch at s = 0.1 / 0.4
     s = _first_touch(xi0, xi0 + DT * ui, ui, ui, xj0, xj0 + DT * uj, uj, uj, BOX, PER, DT, 1.0)
     assert 0.25 - 1e-6 < s <= 0.25
+
+
+@njit
+def _first_touch_in_a_kernel(xi0, xi1, ui0, ui1, xj0, xj1, uj0, uj1):
+    """_first_touch inlined into a kernel compiled with Python's error model (as
+    phase._engage_start is): a division by zero there raises."""
+    return _first_touch(xi0, xi1, ui0, ui1, xj0, xj1, uj0, uj1, BOX, PER, DT, 1.0)
+
+
+def test_two_grains_on_the_same_chord_never_touch_and_nothing_divides_by_zero():
+    xi0, xj0 = np.array([10.0, 3.0, 5.0]), np.array([12.0, 3.0, 5.0])  # 2 d apart
+    for u in (np.zeros(3), np.array([8.0, -1.0, 0.5])):  # at rest, or moving alike: Δ = 0
+        s = _first_touch_in_a_kernel(xi0, xi0 + DT * u, u, u, xj0, xj0 + DT * u, u, u)
+        assert s == np.inf
+    ui, uj = np.array([10.0, 0.0, 0.0]), np.zeros(3)  # i closes on j at 10 u*, 0.2 d in the step
+    s = _first_touch_in_a_kernel(xi0, xi0 + DT * ui, ui, ui, xj0, xj0 + DT * uj, uj, uj)
+    assert 5.0 - 1e-6 < s <= 5.0  # 1 d to close: five steps on, so not in this one
+    xj0 = np.array([11.1, 3.0, 5.0])  # 0.1 d to close: s = 0.5
+    s = _first_touch_in_a_kernel(xi0, xi0 + DT * ui, ui, ui, xj0, xj0 + DT * uj, uj, uj)
+    assert 0.5 - 1e-6 < s <= 0.5
 
 
 def test_the_bed_bound():
