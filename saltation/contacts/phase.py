@@ -1677,15 +1677,15 @@ def _chord_touch(r2, rd, dd, bulge, d):
     lim = d * (1.0 + TOUCH_EPS) + bulge
     c0 = r2 - lim * lim
     disc = rd * rd - dd * c0
-    # the smaller root, cancellation-free; worked out whatever the case and then chosen
+    # the chord reaches d + B when it closes in (rd < 0) and the quadratic has roots; the
+    # smaller root, cancellation-free, is worked out whatever the case and then chosen
     # (selects, not branches: in the dense layer which case holds is a coin toss per pair).
-    # Its divisor is > 0 where it is used (rd < 0) and 1 elsewhere: inlined, this takes
-    # the caller's error model, which may raise on a division by zero (rd = Δ = 0: two
-    # grains with the same chord)
+    # Where it is not chosen it divides by 1: inlined, this takes the caller's error model,
+    # which may raise on a division by zero (rd = Δ = 0: two grains with the same chord)
+    meets = (rd < 0.0) & (disc >= 0.0)
     den = math.sqrt(max(disc, 0.0)) - rd
-    root = c0 / (den if rd < 0.0 else 1.0) * (1.0 - TOUCH_EPS)
-    apart = (rd >= 0.0) | (disc < 0.0)  # the chord only moves apart, or passes by
-    later = np.inf if apart else root
+    root = c0 / (den if meets else 1.0) * (1.0 - TOUCH_EPS)
+    later = root if meets else np.inf
     return 0.0 if c0 <= 0.0 else later
 
 

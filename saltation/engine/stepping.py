@@ -272,7 +272,7 @@ class Stepper:
 
         def jobs():
             elsewhere = [(soft_contact_phase, typed(st, ws.x0, self.model, self.cl, self.ph, self.bc, 0.0, 0, self.dt,
-                                                    soft.n_sub, empty_substep_set(), soft.threads, soft.skin))]
+                                                    soft.n_sub, self.cs, soft.threads, soft.skin))]
             here = [(_free_flight, typed(f, self.coef, st, ws, self.hist_coef, 0.0, self.dt)),
                     (_bed_pass, typed(st, ws, 0.0, self.dt, 0, self.bed, self.virtual, self.packed, self.pb,
                                       self.last_contact, self.top_d, self.ph.active))]
