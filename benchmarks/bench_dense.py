@@ -84,9 +84,13 @@ Full-sweep estimate: the paper's sweep (``--sweep``, default cases/concentration
 grains, 200 s each) costs Σ N · n_steps / (grain-steps/s at that concentration, one
 thread) core-seconds; with 2 workers × 1 thread on this 2-core machine the wall time is
 that sum / 2 (and at least the longest case; the greedy longest-first schedule is
-printed too). Assumptions: the cost per grain-step at a concentration does not depend
-on the domain size (the phases are linear in N: benchmarks/bench_scaling.py) nor on
-τ*/τ*c (measured at ``--tau-ratio`` only), the measured state (after the spin-up) is
+printed too). Each case takes the cost measured at its own τ*/τ*c (a run measures one,
+``--tau-ratio``; ``--with-json`` joins runs at the others), else at the nearest one
+measured (marked T). Assumptions: the cost per grain-step at a concentration does not
+depend on the domain size (the phases are linear in N: benchmarks/bench_scaling.py;
+where a concentration was measured on the paper's domain at one τ*/τ*c and only on the
+reduced one at another, the reduced figure is scaled by the paper/reduced ratio of the
+first, marked R), the measured state (after the spin-up) is
 representative of the 200 s, each worker has a core to itself (this machine is shared:
 the load average at each measurement is printed; a busier machine is slower; repeated
 runs of the same deterministic state differed by up to ~35 % in grain-steps/s), only the
@@ -607,45 +611,74 @@ def run_one(c_pct, args) -> dict:
 
 
 def sweep_estimate(rows, path, threads=1):
-    """Wall time of the full sweep with WORKERS workers × 1 thread from the measured rates."""
+    """Wall time of the full sweep with WORKERS workers × 1 thread from the measured rates
+    (module docstring, "Full-sweep estimate")."""
     from saltation.case.schema import load_case
     from saltation.studies.sweep import load_sweep
 
-    best = {}  # concentration -> (row, on the paper's domain): that measurement wins over a reduced one
+    # (concentration, τ*/τ*c or None: a row that does not say serves every τ) -> {domain: µs per grain-step}
+    meas = {}
     for r in rows:
         if "error" in r or str(threads) not in r.get("runs", {}):
             continue
-        key, full = paper_c(r["concentration_pct"]), r.get("domain") == "paper"
-        if key not in best or (full and not best[key][1]):
-            best[key] = (r, full)
-    meas = sorted((r["concentration_pct"], r["runs"][str(threads)]["us_per_grain_step"], full)
-                  for r, full in best.values())
+        tau = r.get("tau_ratio")
+        key = (paper_c(r["concentration_pct"]), None if tau is None else round(tau, 2))
+        meas.setdefault(key, {})[r.get("domain", "reduced")] = r["runs"][str(threads)]["us_per_grain_step"]
     if not meas:
         return None
-    cs = [m[0] for m in meas]
 
-    def cost_us(c):  # µs per grain-step at c (%): measured, else linear in C between measured points
-        for x, y, full in meas:
-            if paper_c(x) == paper_c(c):
-                return y, False, full
-        if c <= cs[0]:
-            return meas[0][1], True, False
-        if c >= cs[-1]:
-            return meas[-1][1], True, False
-        for (x0, y0, _), (x1, y1, _) in zip(meas, meas[1:]):
-            if x0 <= c <= x1:
-                return y0 + (y1 - y0) * (c - x0) / (x1 - x0), True, False
+    def at_c(cp, tau):
+        """(µs, paper's domain, domain factor, τ measured) at a measured concentration: the
+        measurement at this τ (or one that serves every τ), else at the nearest τ; on the
+        paper's domain if there is one, else the reduced one times the paper/reduced ratio
+        measured at another τ of this concentration (the domain factor), if any."""
+        taus = [t for c, t in meas if c == cp]
+        if tau in taus:
+            t_used = tau
+        elif None in taus:
+            t_used = None
+        else:
+            t_used = min(taus, key=lambda t: (abs(t - tau), t))
+        m = meas[(cp, t_used)]
+        if "paper" in m:
+            return m["paper"], True, None, t_used
+        pairs = sorted((abs(t - tau) if t is not None else 0.0, t) for t in taus
+                       if {"paper", "reduced"} <= set(meas[(cp, t)]))
+        if pairs:
+            f = meas[(cp, pairs[0][1])]
+            factor = f["paper"] / f["reduced"]
+            return m["reduced"] * factor, False, factor, t_used
+        return m["reduced"], False, None, t_used
+
+    cs = sorted({c for c, _ in meas})
+
+    def cost_us(c_pct, tau):
+        """(µs per grain-step, interpolated in C, paper's domain, domain factor, measured at
+        another τ): linear in C between measured concentrations, constant beyond them."""
+        cp = paper_c(c_pct)
+        if cp in cs:
+            us, full, factor, t_used = at_c(cp, tau)
+            return us, False, full, factor, t_used not in (None, tau)
+        lo = max((x for x in cs if x < cp), default=None)
+        hi = min((x for x in cs if x > cp), default=None)
+        if lo is None or hi is None:
+            us, _, factor, t_used = at_c(hi if lo is None else lo, tau)
+            return us, True, False, factor, t_used not in (None, tau)
+        (u0, _, f0, t0), (u1, _, f1, t1) = at_c(lo, tau), at_c(hi, tau)
+        return (u0 + (u1 - u0) * (cp - lo) / (hi - lo), True, False, f0 or f1,
+                t0 not in (None, tau) or t1 not in (None, tau))
 
     sw = load_sweep(path)
     cases = []
     for sc in sw.cases:
         case = load_case(sc.tables, sc.values)
         c_pct = 100.0 * case.concentration
-        us, interp, full = cost_us(c_pct)
+        us, interp, full, factor, other_tau = cost_us(c_pct, round(case.tau_ratio, 2))
         core_s = case.n_particles * case.n_steps * us * 1e-6
         cases.append({"name": sc.name, "concentration_pct": c_pct, "tau_ratio": case.tau_ratio,
                       "n": case.n_particles, "steps": case.n_steps, "us_per_grain_step": us,
-                      "interpolated": interp, "measured_on_paper_domain": full, "core_s": core_s})
+                      "interpolated": interp, "measured_on_paper_domain": full, "domain_factor": factor,
+                      "other_tau": other_tau, "core_s": core_s})
     total = sum(x["core_s"] for x in cases)
     finish = [0.0] * WORKERS  # greedy longest first
     for x in sorted(cases, key=lambda x: -x["core_s"]):
@@ -786,18 +819,24 @@ def print_estimate(est):
     taus = sorted({x["tau_ratio"] for x in est["cases"]})
     steps = {x["tau_ratio"]: x["steps"] for x in est["cases"]}
     print("  steps per case: " + ", ".join(f"{steps[t]} at tau*/tau*c = {t}" for t in taus))
-    head = f"{'C %':>5} {'N':>6} {'us/g-st':>8} " + " ".join(f"{'core-h ' + str(t):>12}" for t in taus)
+    head = f"{'C %':>5} {'N':>6} " + " ".join(f"{'us/g-st':>8} {'core-h':>7}" for _ in taus)
+    print(" " * 13 + " ".join(f"{'tau*/tau*c ' + str(t):>16}" for t in taus))
     print(head + "\n" + "-" * len(head))
     by_c = {}
     for x in est["cases"]:
         by_c.setdefault(paper_c(x["concentration_pct"]), []).append(x)
+
+    def mark(x):
+        return (("*" if x["interpolated"] else "F" if x.get("measured_on_paper_domain") else
+                 "R" if x.get("domain_factor") else " ") + ("T" if x.get("other_tau") else " "))
+
     for cp, xs in sorted(by_c.items()):
         xs.sort(key=lambda x: x["tau_ratio"])
-        mark = "*" if xs[0]["interpolated"] else ("F" if xs[0].get("measured_on_paper_domain") else " ")
-        print(f"{cp:>5.2f} {xs[0]['n']:>6d} {xs[0]['us_per_grain_step']:>7.2f}{mark} "
-              + " ".join(f"{x['core_s'] / 3600:>12.1f}" for x in xs))
+        print(f"{cp:>5.2f} {xs[0]['n']:>6d} "
+              + " ".join(f"{x['us_per_grain_step']:>6.2f}{mark(x)} {x['core_s'] / 3600:>7.1f}" for x in xs))
     print("* not measured: linear in C between the measured concentrations, constant beyond them; F: measured on "
-          "the paper's domain (else on the reduced one)")
+          "the paper's domain (else on the reduced one); R: on the reduced one times the paper/reduced ratio "
+          "measured at another tau*/tau*c of that concentration; T: measured at another tau*/tau*c (the nearest)")
     measured = [x["concentration_pct"] for x in est["cases"] if not x["interpolated"]]
     below = sorted({paper_c(x["concentration_pct"]) for x in est["cases"]
                     if x["interpolated"] and measured and x["concentration_pct"] < min(measured)})
@@ -808,11 +847,13 @@ def print_estimate(est):
     print(f"  total {est['core_s'] / 3600:.0f} core-hours; wall time {est['days_even_split']:.1f} days split evenly over "
           f"{est['workers']} workers, {est['days_longest_first']:.1f} days with longest-case-first scheduling "
           f"(longest case {est['longest_case_s'] / 86400:.1f} days)")
-    print("  assumes: cost per grain-step at a concentration independent of domain size and of tau*/tau*c (measured "
-          "at one), the post-spin-up state representative of 200 s, a free core per worker; stepping only (no "
-          "outputs: jumps, variances, checkpoints)")
+    print("  assumes: cost per grain-step independent of domain size below the percolating concentrations (R: "
+          "the paper/reduced ratio independent of tau*/tau*c), T: of tau*/tau*c, the post-spin-up state "
+          "representative of 200 s, a free core per worker; stepping only (no outputs: jumps, variances, "
+          "checkpoints)")
     reduced = sorted({paper_c(x["concentration_pct"]) for x in est["cases"]
-                      if x["concentration_pct"] >= PERCOLATING_C - 0.005 and not x.get("measured_on_paper_domain")})
+                      if x["concentration_pct"] >= PERCOLATING_C - 0.005 and not x.get("measured_on_paper_domain")
+                      and not x.get("domain_factor")})
     if reduced:
         print(f"  the domain size does matter where the near-bed layer percolates (from {PERCOLATING_C} %: module "
               f"docstring); {', '.join(f'{c:g}' for c in reduced)} % came from the reduced domain, so this estimate "

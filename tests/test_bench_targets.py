@@ -90,3 +90,33 @@ def test_the_estimate_takes_a_paper_domain_measurement_over_a_reduced_one(bench,
     bench.print_estimate(bench.sweep_estimate([_measured(2.07, 9.0, "paper"), _measured(3.94, 15.0, "paper")],
                                               bench.FULL))
     assert "came from the reduced domain" not in capsys.readouterr().out
+
+
+def _at_tau(c, us, domain, tau):
+    return {**_measured(c, us, domain), "tau_ratio": tau}
+
+
+def test_the_estimate_takes_each_cases_own_flow_intensity_and_says_where_it_could_not(bench, capsys):
+    """Each case costs what was measured at its τ*/τ*c; a reduced-domain measurement is
+    scaled by the paper/reduced ratio of its concentration measured at another τ*/τ*c
+    (marked R); where a τ*/τ*c was not measured the nearest one stands in (marked T)."""
+    rows = [_at_tau(2.07, 4.0, "reduced", 1.79), _at_tau(3.94, 5.0, "reduced", 1.79),
+            _at_tau(3.94, 7.5, "paper", 1.79), _at_tau(3.94, 4.0, "reduced", 2.43),
+            _at_tau(2.07, 3.0, "reduced", 2.67)]
+    est = bench.sweep_estimate(rows, bench.FULL)
+    at = {(round(x["concentration_pct"], 2), x["tau_ratio"]): x for x in est["cases"]}
+    assert at[(3.94, 1.79)]["us_per_grain_step"] == 7.5 and at[(3.94, 1.79)]["measured_on_paper_domain"]
+    # 2.43: the reduced 4.0 times 7.5 / 5.0
+    assert at[(3.94, 2.43)]["us_per_grain_step"] == pytest.approx(6.0)
+    assert at[(3.94, 2.43)]["domain_factor"] == pytest.approx(1.5) and not at[(3.94, 2.43)]["other_tau"]
+    # 2.67 not measured at 3.94 %: the nearest, 2.43, scaled likewise
+    assert at[(3.94, 2.67)]["us_per_grain_step"] == pytest.approx(6.0) and at[(3.94, 2.67)]["other_tau"]
+    assert at[(2.07, 2.67)]["us_per_grain_step"] == 3.0 and not at[(2.07, 2.67)]["other_tau"]
+    assert at[(2.07, 2.43)]["us_per_grain_step"] == 3.0 and at[(2.07, 2.43)]["other_tau"]  # 2.67 nearer than 1.79
+    assert at[(2.07, 2.43)]["domain_factor"] is None
+    bench.print_estimate(est)
+    out = capsys.readouterr().out
+    line = next(x for x in out.splitlines() if x.startswith(" 3.94"))
+    assert " 7.50F " in line and " 6.00R " in line and " 6.00RT" in line
+    # 2.07 % has no paper-domain measurement at any tau*/tau*c: still named
+    assert "2.07 % came from the reduced domain, so this estimate is low" in out
