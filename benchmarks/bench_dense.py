@@ -642,10 +642,9 @@ def sweep_estimate(rows, path, threads=1):
         m = meas[(cp, t_used)]
         if "paper" in m:
             return m["paper"], True, None, t_used
-        pairs = sorted((abs(t - tau) if t is not None else 0.0, t) for t in taus
-                       if {"paper", "reduced"} <= set(meas[(cp, t)]))
-        if pairs:
-            f = meas[(cp, pairs[0][1])]
+        both = [t for t in taus if {"paper", "reduced"} <= set(meas[(cp, t)])]
+        if both:
+            f = meas[(cp, min(both, key=lambda t: 0.0 if t is None else abs(t - tau)))]
             factor = f["paper"] / f["reduced"]
             return m["reduced"] * factor, False, factor, t_used
         return m["reduced"], False, None, t_used

@@ -120,3 +120,12 @@ def test_the_estimate_takes_each_cases_own_flow_intensity_and_says_where_it_coul
     assert " 7.50F " in line and " 6.00R " in line and " 6.00RT" in line
     # 2.07 % has no paper-domain measurement at any tau*/tau*c: still named
     assert "2.07 % came from the reduced domain, so this estimate is low" in out
+
+
+def test_rows_with_and_without_a_flow_intensity_mix(bench):
+    """An older saved run (no τ*/τ*c: it serves every one) joined with newer ones."""
+    rows = [_measured(3.94, 5.0, "reduced"), _measured(3.94, 7.5, "paper"),
+            _at_tau(3.94, 4.0, "reduced", 2.43), _at_tau(3.94, 6.0, "paper", 2.43)]
+    at = {x["tau_ratio"]: x["us_per_grain_step"] for x in bench.sweep_estimate(rows, bench.FULL)["cases"]
+          if round(x["concentration_pct"], 2) == 3.94}
+    assert at == {1.79: 7.5, 2.43: 6.0, 2.67: 7.5}
