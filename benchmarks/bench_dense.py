@@ -955,7 +955,9 @@ def main():
              "command": " ".join(sys.argv),
              # which code is measured: an editable install wins over this script's own tree
              # unless PYTHONPATH names it
-             "saltation": str(Path(saltation.__file__).parent)}
+             "saltation": str(Path(saltation.__file__).parent),
+             # idle OpenMP threads' spin (flowfields/_openmp.py): it moves the two-thread figures
+             "gomp_spincount": os.environ.get("GOMP_SPINCOUNT"), "omp_wait_policy": os.environ.get("OMP_WAIT_POLICY")}
     rows = []
     for c in args.concentrations:
         rows.append(run_one(c, args))
@@ -973,7 +975,8 @@ def main():
               "threads": args.threads, "concentrations": rows, "with_json": args.with_json, "full_sweep_estimate": est,
               "wall_s": time.perf_counter() - t0, "load_avg_end": os.getloadavg()}
     print(f"\n(benchmark wall time {result['wall_s']:.0f} s; load average at start {start['load_avg'][0]:.2f}, "
-          f"end {result['load_avg_end'][0]:.2f}, {os.cpu_count()} CPUs; code measured: {start['saltation']})")
+          f"end {result['load_avg_end'][0]:.2f}, {os.cpu_count()} CPUs; GOMP_SPINCOUNT {start['gomp_spincount']}, "
+          f"OMP_WAIT_POLICY {start['omp_wait_policy']}; code measured: {start['saltation']})")
     if args.json:
         with open(args.json, "w") as fh:
             json.dump(result, fh, indent=1)
