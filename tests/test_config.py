@@ -114,8 +114,8 @@ def test_derived_numbers_of_the_validation_grain():
     assert case.alpha == pytest.approx(1 / (1 + 1.65 + 0.5))
     assert case.time_scale == pytest.approx(d / u_star)
     assert case.viscous_length == pytest.approx(nu / u_star)
-    assert case.dt_particle == 0.005  # the default (docs/studies/stiffness_dt.md)
-    assert case.dt == pytest.approx(0.005 * d / u_star)
+    assert case.dt_particle == 0.02  # the default (docs/studies/stiffness_dt.md)
+    assert case.dt == pytest.approx(0.02 * d / u_star)
     assert case.duration_particle == pytest.approx(1.0 * u_star / d)
     assert case.stokes_response_time == pytest.approx((2.65 + 0.5) * d**2 / (18 * nu))
     assert case.response_time < case.stokes_response_time

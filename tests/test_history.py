@@ -113,7 +113,7 @@ def test_prefactor_matches_spec_forms():
 def test_memory_per_particle():
     s = H.allocate_history_state(10, 100)
     per_particle = sum(a.nbytes for a in s) / 10
-    assert per_particle == H.history_state_bytes(100) == 24 * 100 + 304 + 32 * H.N_JUMPS
+    assert per_particle == H.history_state_bytes(100) == 24 * 100 + 312 + 32 * H.N_JUMPS
 
 
 # ------------------------------------------------------------------ exactness
@@ -359,13 +359,14 @@ def test_rk4_with_tail_close_to_exact():
 P_PROBE = 1e-7
 
 
-def _drive_prescribed_slip(slip_of_t, steps, dt, n_steps, n_window=10, impacts="keep"):
+def _drive_prescribed_slip(slip_of_t, steps, dt, n_steps, n_window=10, impacts="keep", phi=0.0):
     """Production history kernels fed a prescribed slip u_r(t) (a vanishing prefactor: the
     grain's velocity is the slip itself, uf = 0), with impulsive steps at the starts of the
     given step indices (marked as impacts). Returns per step: t_{n+1}, the history impulse
     ∫ I dt over the step that the force applies (held I_n in the stages, the trapezoidal
     end-of-step closure, the exact slip-step part), and the full I(t_{n+1}) (carried I +
-    the kept steps' Δ/√lag)."""
+    the kept steps' Δ/√lag). ``phi``: the steps happened that fraction of a step before the
+    step's start they are marked at (history_mark_impact_at)."""
     co = H.make_history_coefficients(dt, n_window, impacts=impacts)
     s = H.allocate_history_state(1, n_window)
     sh, me, ta = s.slip_hist[0], s.meta[0], s.tail[0]
@@ -375,7 +376,10 @@ def _drive_prescribed_slip(slip_of_t, steps, dt, n_steps, n_window=10, impacts="
     for n in range(n_steps):
         t = n * dt
         if n in steps:
-            H.history_mark_impact(me)
+            if phi == 0.0:
+                H.history_mark_impact(me)
+            else:
+                H.history_mark_impact_at(me, int(round(phi * H.AGE_TICKS)))
         # the impact comes after a step's end: the slip at a step's start is post-impact,
         # the sample that closes the step before it pre-impact
         H.history_start_step(slip_of_t(t, True).copy(), sh, me, ta, i_hist, dt, co.keep_impacts, co.tail_time,
@@ -390,8 +394,8 @@ def _drive_prescribed_slip(slip_of_t, steps, dt, n_steps, n_window=10, impacts="
         impulse = dt * i_start + (u_star - u) / P_PROBE
         full = i_hist.copy()
         for j in range(H.N_JUMPS):
-            a = me[H.META_JUMPS + j]
-            if a > 0:
+            if me[H.META_JUMPS + j] > 0:
+                a = me[H.META_JUMPS + j] / H.AGE_TICKS
                 full += ta[H.N_MODES + j] / np.sqrt(a * dt)
         out.append((t + dt, impulse, full))
     return out
@@ -431,6 +435,37 @@ def test_a_step_in_slip_enters_the_history_as_delta_over_sqrt_lag():
     cum = np.cumsum([r[1] for r in rows], axis=0)
     exact = (4.0 / 3.0) * np.outer(ts**1.5, a) + 2.0 * np.outer(np.sqrt(np.clip(ts - t_c, 0, None)), delta)
     assert np.max(np.abs(cum - exact)) < 2e-3
+
+
+def test_a_step_inside_a_time_step_is_dated_where_it_happened():
+    """A slip step at t_c = t_n − φΔt (an impact at a fraction 1 − φ of the step before
+    t_n, marked with its age φ): the kernels give the impulse from t_n on,
+    2Δ(√(t − t_c) − √(φΔt)); the part before t_n, 2Δ√(φΔt), is the caller's
+    (flight/spheres._flight_remainder). Dated at t_n instead (the old rule) the impulse
+    would be 2Δ√(t − t_n): off by ~2Δ√(φΔt) right after the impact."""
+    delta = np.array([-1.2, 0.8, 0.3])
+    dt, n_c, phi = 0.02, 25, 0.37
+    t_n = n_c * dt
+    t_c = t_n - phi * dt
+
+    def step_only(t, post):
+        return delta if t > t_n - (1e-12 if post else -1e-12) else 0.0 * delta
+
+    rows = _drive_prescribed_slip(step_only, {n_c}, dt, 80, phi=phi)
+    ts = np.array([r[0] for r in rows])
+    cum = np.cumsum([r[1] for r in rows], axis=0)
+    after = ts > t_n + 1e-12
+    exact = 2.0 * np.outer(np.sqrt(np.clip(ts - t_c, 0, None)) - np.sqrt(phi * dt), delta)
+    in_window = after & (ts <= t_c + 10 * dt)
+    np.testing.assert_allclose(cum[in_window], exact[in_window], atol=1e-6 * np.abs(delta).max(), rtol=0)
+    # I itself carries Δ/√(t − t_c), with the step's own age
+    k = int(round((t_n + 3 * dt) / dt)) - 1
+    np.testing.assert_allclose(rows[k][2], delta / np.sqrt(ts[k] - t_c), rtol=1e-6)  # the age to 2⁻²⁰ step
+    # the old dating is far off in the first steps
+    node = _drive_prescribed_slip(step_only, {n_c}, dt, 80)
+    cum_node = np.cumsum([r[1] for r in node], axis=0)
+    first = int(np.argmax(after))
+    assert np.abs(cum_node[first] - exact[first]).max() > 0.1 * np.abs(exact[first]).max()
 
 
 def test_restart_option_drops_the_step_and_the_memory():

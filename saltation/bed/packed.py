@@ -22,8 +22,9 @@ Impact (hard sphere with the real normal)
 -----------------------------------------
 After a grain's move in a step (free flight, then grain–grain contacts) from x₀ to x₁
 with end velocity u: if x₁ lies within one diameter of some bed sphere centres c, the
-time of entry is found by running the move back along u (the same linear back-tracking
-as the virtual bed): τ = the positive root of |x₁ − τu − c| = 1, the largest over the
+time of entry is found by running the move back along u (linear back-tracking, first
+order in Δt; the virtual bed finds its contact on the step's Hermite path and flies the
+rest of the step with the fluid forces, flight/spheres._bed_impact): τ = the positive root of |x₁ − τu − c| = 1, the largest over the
 spheres overlapped (the first one hit). At the contact point x_h = x₁ − τu the normal is
 n = (x_h − c)/|x_h − c|; SPEC §4's impulse (``bed.virtual.rebound``, restitution e, Coulomb
 friction f, spin included) gives the new velocity and spin, and the grain moves on for
@@ -273,7 +274,7 @@ def packed_bed_check_particle(st, w, p, t, dt, step, coef_bed, pb, last_contact)
         k, tau = _nearest_entry(pb, pos[0], pos[1], pos[2], vel[0], vel[1], vel[2], remaining, 1.0)
         if k < 0:
             break
-        # contact point: back along the end-of-step velocity (linear, as on the virtual bed)
+        # contact point: back along the end-of-step velocity (linear; module docstring)
         xh = pos[0] - tau * vel[0]
         yh = pos[1] - tau * vel[1]
         zh = pos[2] - tau * vel[2]

@@ -133,12 +133,12 @@ from ..flight.composites import (
     chunk_range,
     free_flight_pass,
 )
+from ..flight.path import hermite_weights
 from ..grains.refs import as_tuple, struct_ref
 from ..io.progress import wall_clock
 from ..physics.contact_law import spring_dashpot
 from ..physics.history import history_mark_impact
 from .cells import axis_index, axis_span, grid_shape, min_image, sort_points, stencil_cell
-from .path import hermite_weights
 
 __all__ = ["ClusterContacts", "compile_jobs", "make_cluster_contacts", "with_packed_bed", "contact_parameters", "substeps", "contact_phase",
            "build_contact_list", "as_refs", "contacts_of",

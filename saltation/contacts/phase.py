@@ -25,7 +25,9 @@ drift, forces at the half-kicked velocities, half kick). Hence:
 - for a grain in contact, ``(x, u, ϖ) = (x₁, u₁, ϖ₁) + (δx, δu, δϖ)``: the fluid force
   acts as in free flight (held over the step, the usual CFD–DEM assumption: the contact
   lasts ~3·10⁻³ d/u*, far shorter than the drag response time), the contact impulse adds
-  on top; first-order splitting error O(Δt · |Δu_contact| · ∂a_fluid/∂u).
+  on top; that split's first-order error, O(Δt · |Δu_contact| · ∂a_fluid/∂u), is taken
+  out for the drag after the phase (contacts/fluid_response.py: the drag of the new
+  velocity from the contact on, and the Basset slip step dated at the contact).
 
 After the phase a grain that had a contact gets the fluid re-sampled at its new position
 and its **Basset history restarted**, exactly as at a bed impact (physics/history.py): a contact
@@ -407,6 +409,7 @@ from numba import njit, prange
 from ..bed.jumps import close_jump
 from ..bed.packed import bed_cell, bed_offset, bed_stencil_cell
 from ..bed.virtual import virtual_bed_normal
+from ..flight.path import hermite_point
 from ..flight.spheres import GrainState, GrainStateRef
 from ..grains.refs import as_tuple, struct_ref
 from ..io.progress import wall_clock
@@ -423,7 +426,6 @@ from .pairs import (
     push_apart,
     rebuild,
 )
-from .path import hermite_weights
 
 __all__ = ["ContactPhase", "SubstepSet", "BedContext", "make_contact_phase", "make_bed_context", "soft_contact_phase",
            "empty_substep_set",
@@ -534,6 +536,8 @@ class ContactPhase(NamedTuple):
     #                        unblocked[1] (UNBLOCKED_STEPS; 0: never) steps on after one giant block ("Blocks")
     clocks: np.ndarray  # (N_CLOCKS,) s spent in each part (CLOCK_*), added up only when it has that
     #                     length (profiling; length 0: no clock is read)
+    deviation: np.ndarray  # (N, 6) δx, δu at the step's end of the grains with a contact in this step
+    #                        (the others' rows are stale): contacts/fluid_response.py
 
 
 def make_contact_phase(n: int, block_members: int = BLOCK_MEMBERS,
@@ -546,7 +550,7 @@ def make_contact_phase(n: int, block_members: int = BLOCK_MEMBERS,
         np.zeros(n), np.zeros(N_COUNTERS, np.int64), np.array([block_members], np.int64),
         np.array([float(x) for x in block_slack]), np.array([PARALLEL_MEMBERS, LANE_THREADS], np.int64),
         np.array([NEAR_SLACK]), np.array([float(RETIRE_BACKOFF)]), np.array([0, UNBLOCKED_STEPS], np.int64),
-        np.zeros(N_CLOCKS if profile else 0),
+        np.zeros(N_CLOCKS if profile else 0), np.zeros((n, 6)),
     )
 
 
@@ -685,19 +689,10 @@ def _grow(cs, c, r):
 
 
 @njit(cache=True, no_cfunc_wrapper=True, inline="always", error_model="numpy", _nrt=False)
-def _hermite(x0, x1, v0, v1, s, dt):
-    """Cubic Hermite position and velocity at s ∈ [0, 1] through (x0, v0), (x1, v1)."""
-    h00, h10, h01, h11, d00, d10, d11 = hermite_weights(s)
-    x = h00 * x0 + h01 * x1 + dt * (h10 * v0 + h11 * v1)
-    v = d00 * (x0 - x1) / dt + d10 * v0 + d11 * v1
-    return x, v
-
-
-@njit(cache=True, no_cfunc_wrapper=True, inline="always", error_model="numpy", _nrt=False)
 def _on_path(path, a, c, s, dt):
-    """Member a's free-flight position and velocity along axis c at s (_hermite of its
+    """Member a's free-flight position and velocity along axis c at s (hermite_point of its
     path row: x₀, u₀, ϖ₀, x₁, u₁, ϖ₁)."""
-    return _hermite(path[a, c], path[a, 9 + c], path[a, 3 + c], path[a, 12 + c], s, dt)
+    return hermite_point(path[a, c], path[a, 9 + c], path[a, 3 + c], path[a, 12 + c], s, dt)
 
 
 @njit(cache=True, no_cfunc_wrapper=True, inline="always", error_model="numpy", _nrt=False)
@@ -735,7 +730,7 @@ def _spin_of(cs, a, s, c):
 @njit(cache=True, no_cfunc_wrapper=True, inline="always", error_model="numpy", _nrt=False)
 def _position_of(cs, b, s, dt):
     """x of member b at s (that of _state_of): its current position when active, else its
-    point on the free-flight path (the inlined _hermite's unused velocity is dropped by
+    point on the free-flight path (the inlined hermite_point's unused velocity is dropped by
     the compiler). The force loop reads it from ``at`` (_at), once per member and sub-step."""
     if cs.active[b] != 0:
         return cs.cur[b, 0], cs.cur[b, 1], cs.cur[b, 2]
@@ -2407,6 +2402,8 @@ def _scatter_set(cs, st, cl, bc, ph, skin_half):
                 pos[g, c] += cs.dev[a, c]
                 vel[g, c] += cs.dev[a, 3 + c]
                 spin[g, c] += cs.dev[a, 6 + c]
+                ph.deviation[g, c] = cs.dev[a, c]
+                ph.deviation[g, 3 + c] = cs.dev[a, 3 + c]
             st.fresh[g] = 0
             history_mark_impact(st.hist_meta[g])  # the next step takes the slip step (physics/history.py)
         # the bed pass skips the grains sub-stepped here, touched or not: the jump's highest

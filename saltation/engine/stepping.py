@@ -29,6 +29,7 @@ from numba import njit, prange
 from ..bed.jumps import BED_MIN_JUMP_DURATION, BED_MIN_JUMP_HEIGHT
 from ..bed.packed import make_packed_bed, packed_bed_check_particle
 from ..contacts import phase
+from ..contacts.fluid_response import fluid_response
 from ..contacts.pairs import contact_model_from_case, make_contact_list, rebuild
 from ..contacts.phase import (
     MERGED_PASSES,
@@ -100,7 +101,7 @@ class PackedBedPass(NamedTuple):
 
 
 @njit(cache=True, no_cfunc_wrapper=True, error_model="numpy", _nrt=False)
-def _bed_range(st, w, lo, hi, t, dt, step, bed, virtual, packed, pb, last_contact, top, skip, use_skip):
+def _bed_range(f, coef, hc, st, w, lo, hi, t, dt, step, bed, virtual, packed, pb, last_contact, top, skip, use_skip):
     """The bed for grains lo..hi-1 (one call per chunk: flight.spheres.CHUNK); one of
     ``virtual`` (VirtualBed) and ``packed`` (PackedBedPass) is given, the other None."""
     for p in range(lo, hi):
@@ -108,7 +109,7 @@ def _bed_range(st, w, lo, hi, t, dt, step, bed, virtual, packed, pb, last_contac
             continue
         if not (use_skip and skip[p] != 0):
             if virtual is not None:
-                _bed_check_body(st, w, p, t, dt, bed, virtual.seed)
+                _bed_check_body(f, coef, hc, st, w, p, t, dt, bed, virtual.seed)
             if packed is not None:
                 packed_bed_check_particle(st, w, p, t, dt, step, bed, pb, last_contact)
         if st.pos[p, 1] > top:
@@ -116,14 +117,14 @@ def _bed_range(st, w, lo, hi, t, dt, step, bed, virtual, packed, pb, last_contac
 
 
 @njit(cache=True, no_cfunc_wrapper=True, parallel=True)
-def _bed_pass(st, w, t, dt, step, bed, virtual, packed, pb, last_contact, top, skip):
+def _bed_pass(f, coef, hc, st, w, t, dt, step, bed, virtual, packed, pb, last_contact, top, skip):
     """The bed for every grain not in ``skip`` (grains whose bed contact the soft contact
     phase resolved; ``skip`` empty: none)."""
     n = st.pos.shape[0]
     use_skip = skip.shape[0] == n
     sr, wr = GrainStateRef(*st), WorkspaceRef(*w)  # as in _free_flight
     for c in prange((n + CHUNK - 1) // CHUNK):
-        _bed_range(as_tuple(sr, GrainState), as_tuple(wr, Workspace), c * CHUNK, min(n, (c + 1) * CHUNK), t, dt,
+        _bed_range(f, coef, hc, as_tuple(sr, GrainState), as_tuple(wr, Workspace), c * CHUNK, min(n, (c + 1) * CHUNK), t, dt,
                    step, bed, virtual, packed, pb, last_contact, top, skip, use_skip)
 
 
@@ -159,11 +160,13 @@ def advance_split(f, coef, bed, virtual, packed, st, w, hc, t0, dt, n_steps, top
         if not bad and soft is not None:
             cl, cs = soft_contact_phase(st, w.x0, model, cl, ph, bc, t, step0 + s, dt, soft.n_sub, cs,
                                         soft.threads, soft.skin)
+            fluid_response(coef, hc.keep_impacts, st.vel, w.uf, ph.deviation, st.hist_meta, st.fresh, ph.act,
+                           ph.n_act[0], dt)
         if not bad and hard is not None:
             hard_contact_phase(st, cl, hard.restitution, hard.friction, scratch)
         c2 = wall_clock()
         if not bad:
-            _bed_pass(st, w, t, dt, step0 + s, bed, virtual, packed, pb, last_contact, top, skip)
+            _bed_pass(f, coef, hc, st, w, t, dt, step0 + s, bed, virtual, packed, pb, last_contact, top, skip)
         c3 = wall_clock()
         timers[0] += c1 - c0
         timers[1] += c2 - c1
@@ -274,7 +277,7 @@ class Stepper:
             elsewhere = [(soft_contact_phase, typed(st, ws.x0, self.model, self.cl, self.ph, self.bc, 0.0, 0, self.dt,
                                                     soft.n_sub, self.cs, soft.threads, soft.skin))]
             here = [(_free_flight, typed(f, self.coef, st, ws, self.hist_coef, 0.0, self.dt)),
-                    (_bed_pass, typed(st, ws, 0.0, self.dt, 0, self.bed, self.virtual, self.packed, self.pb,
+                    (_bed_pass, typed(f, self.coef, self.hist_coef, st, ws, 0.0, self.dt, 0, self.bed, self.virtual, self.packed, self.pb,
                                       self.last_contact, self.top_d, self.ph.active))]
             return elsewhere, here
 

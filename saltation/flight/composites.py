@@ -69,9 +69,10 @@ C_b = Σ c_k J_kᵀ J_k; one 6×6 solve per grain and step. All components resta
 memory together at release and at every bed impact (physics/history.py explains why).
 
 Bed (virtual rough bed, bed/virtual.py). The grain touches the bed when its lowest component
-sphere's bottom reaches y = 0. As for spheres, the crossing is located by linear
-interpolation within the step (centre of mass moved back along v, orientation turned
-back by Ω), the contact normal n is drawn by ``bed.virtual.virtual_bed_normal`` from the
+sphere's bottom reaches y = 0. The crossing is located by linear interpolation within
+the step (centre of mass moved back along v, orientation turned back by Ω; first order in
+Δt — spheres now find it on the step's Hermite path and fly the rest of the step with the
+fluid forces, flight/spheres._bed_impact), the contact normal n is drawn by ``bed.virtual.virtual_bed_normal`` from the
 velocity of that component's centre, and the impulse acts at the contact point
 r_c = R r_k − (d_k/2) n with the rigid-body collision matrix
 K = 1/m − [r_c]× I_w⁻¹ [r_c]× (rigid mass and inertia, no added mass — as the sphere

@@ -41,14 +41,15 @@ State (allocated by the caller for all N particles; ``allocate_history_state``)
 -----------------------------------------------------------------------------
 ===============  ====================  =========================================
 slip_hist        float64 [N, N_w+2, 3]  ring buffer of slip samples u_r(t - jΔt)
-meta             int64   [N, 2+J]       META_HEAD: slot of the newest sample,
+meta             int64   [N, 3+J]       META_HEAD: slot of the newest sample,
                                         META_COUNT: samples since reset
                                         (capped at N_w + 2; negative: an impact
-                                        is pending), then the J = N_JUMPS ages
+                                        is pending), META_PENDING: that impact's
+                                        age, then the J = N_JUMPS ages (ticks)
 tail             float64 [N, m+J, 3]    tail modes Fᵢ, then the kept steps Δu_r
 ===============  ====================  =========================================
 
-Memory per particle: 24 N_w + 304 + 32 J bytes (N_w = 100, J = 4: 2 832 B),
+Memory per particle: 24 N_w + 312 + 32 J bytes (N_w = 100, J = 4: 2 840 B),
 independent of the run length.  Shared coefficients (``make_history_coefficients``): a weight
 table of (N_w+3)·(N_w+2) doubles (81 kB for N_w = 100) and 4 arrays of m.
 
@@ -102,8 +103,8 @@ newest sample, and
 
 * shifts the stored samples by Δu_r, so the window keeps a continuous (smooth) slip whose
   quadrature is unchanged (its node derivatives are differences of samples);
-* keeps the step exactly in one of N_JUMPS slots per grain (its age in steps in
-  ``meta[META_JUMPS + j]``, −1 when free; Δu_r in ``tail[N_MODES + j]``): over each step
+* keeps the step exactly in one of N_JUMPS slots per grain (its age in ``meta[META_JUMPS
+  + j]``, in ticks of 1/AGE_TICKS step, −1 when free; Δu_r in ``tail[N_MODES + j]``): over each step
   [t_n, t_n + Δt] it adds the exact impulse −P Δu_r · 2(√(t_n + Δt − t_c) − √(t_n − t_c))
   (``history_end_step``), no quadrature of the singular kernel;
 * once the step is a window length old (t − t_c = t_win) it passes into the exponential
@@ -111,8 +112,14 @@ newest sample, and
   kernel — and the slot is freed. More than N_JUMPS steps inside one window (a grain
   chattering on the bed) fold the oldest early, with the tail kernel at its age.
 
-A step at the end of a hydrodynamic step (the bed and contact passes follow free flight)
-is at a node of the time grid, so this is exact up to the tail's kernel error; the
+The step's time t_c is where it happened: an impact on the virtual bed at a fraction s
+of its hydrodynamic step marks it ``(1 − s)`` steps old at the step's end
+(``history_mark_impact_at``; flight/spheres._bed_impact, which also gives the grain the
+impulse −P Δu_r · 2√((1 − s)Δt) over the rest of that step). Contacts resolved inside
+the step and packed-bed impacts are dated at the step's end (``history_mark_impact``).
+Dating every bed impact at the step's end lost the first part of that impulse, 2√(φΔt)
+with φ = 1 − s, a first-order error in Δt that showed as +2 % in U at Δt = 0.02 d/u*
+(free flight, benchmarks/study_dt.py). This is exact up to the tail's kernel error; the
 smooth part keeps its second order. The RK4 stages hold the smooth I_n only; the steps'
 impulses enter at the step end (an O(Δt) change of the stage forces, not of the impulse).
 Memory stays bounded: 32 bytes more per slot.
@@ -141,8 +148,10 @@ DEFAULT_WINDOW_STEPS = 100
 
 META_HEAD = 0
 META_COUNT = 1
-META_JUMPS = 2   # meta[META_JUMPS + j]: age in steps of kept slip step j (-1: free)
+META_PENDING = 2  # age (ticks) at the next step's start of the slip step an impact marked
+META_JUMPS = 3   # meta[META_JUMPS + j]: age in ticks of kept slip step j (-1: free)
 N_JUMPS = 4      # slip steps kept exactly inside the window, per grain
+AGE_TICKS = 1 << 20  # ticks per step: a slip step's age, from its time within the step it happened in
 IMPACTS = ("keep", "restart")
 
 
@@ -280,7 +289,7 @@ def allocate_history_state(n_particles, n_window=DEFAULT_WINDOW_STEPS):
 
 def history_state_bytes(n_window=DEFAULT_WINDOW_STEPS):
     """Bytes of history state per particle: 24 N_w + 24 m + 64 + 32 J (= 24 N_w + 432)."""
-    return 8 * (3 * (n_window + 2) + 2 + 3 * N_MODES + 4 * N_JUMPS)
+    return 8 * (3 * (n_window + 2) + META_JUMPS + 3 * N_MODES + 4 * N_JUMPS)
 
 
 # ---------------------------------------------------------------- per-particle kernels
@@ -290,6 +299,7 @@ def history_reset(slip0, slip_hist, meta, tail):
     Arguments are one particle's slices: slip_hist[i], meta[i], tail[i]."""
     meta[META_HEAD] = 0
     meta[META_COUNT] = 1
+    meta[META_PENDING] = 0
     for c in range(3):
         slip_hist[0, c] = slip0[c]
     for k in range(tail.shape[0]):
@@ -300,16 +310,28 @@ def history_reset(slip0, slip_hist, meta, tail):
 
 
 @njit(cache=True, no_cfunc_wrapper=True, _nrt=False)
-def history_mark_impact(meta):
-    """An impact or contact changed the grain's velocity impulsively: the next step takes
-    the slip step into the history, or restarts it (``history_start_step``)."""
+def history_mark_impact_at(meta, ticks):
+    """An impact or contact changed the grain's velocity impulsively, ``ticks`` (of
+    AGE_TICKS per step) before the end of the step: the next step takes the slip step into
+    the history with that age, or restarts it (``history_start_step``). Two in one step
+    make one slip step, dated by the earlier."""
     if meta[META_COUNT] > 0:
         meta[META_COUNT] = -meta[META_COUNT]
+        meta[META_PENDING] = ticks
+    elif meta[META_COUNT] < 0:
+        meta[META_PENDING] = max(meta[META_PENDING], ticks)
+
+
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False)
+def history_mark_impact(meta):
+    """``history_mark_impact_at`` the end of the step (a contact resolved inside the
+    step, a packed-bed impact: dated at the step's end)."""
+    history_mark_impact_at(meta, 0)
 
 
 @njit(cache=True, no_cfunc_wrapper=True, _nrt=False)
 def _fold_jump(meta, tail, j, age, dt, tail_time, tail_weight):
-    # slip step j, `age` steps old, into the tail modes: Δ √(e/tᵢ) exp(-age Δt/(2tᵢ));
+    # slip step j, `age` steps old (a float), into the tail modes: Δ √(e/tᵢ) exp(-age Δt/(2tᵢ));
     # returns what it adds to I (Σ aᵢ × that)
     s0 = 0.0
     s1 = 0.0
@@ -365,12 +387,14 @@ def history_start_step(slip_now, slip_hist, meta, tail, i_hist, dt, keep, tail_t
         elif oldest < 0 or a > meta[META_JUMPS + oldest]:
             oldest = j
     if free < 0:  # all slots taken inside one window: the oldest goes to the tail early
-        f0, f1, f2 = _fold_jump(meta, tail, oldest, meta[META_JUMPS + oldest], dt, tail_time, tail_weight)
+        f0, f1, f2 = _fold_jump(meta, tail, oldest, meta[META_JUMPS + oldest] / AGE_TICKS, dt, tail_time,
+                                tail_weight)
         i_hist[0] += f0
         i_hist[1] += f1
         i_hist[2] += f2
         free = oldest
-    meta[META_JUMPS + free] = 0
+    meta[META_JUMPS + free] = meta[META_PENDING]
+    meta[META_PENDING] = 0
     tail[N_MODES + free, 0] = d0
     tail[N_MODES + free, 1] = d1
     tail[N_MODES + free, 2] = d2
@@ -383,8 +407,8 @@ def jump_impulse(meta, tail, dt):
     q1 = 0.0
     q2 = 0.0
     for j in range(N_JUMPS):
-        a = meta[META_JUMPS + j]
-        if a >= 0:
+        if meta[META_JUMPS + j] >= 0:
+            a = meta[META_JUMPS + j] / AGE_TICKS
             w = 2.0 * (math.sqrt((a + 1.0) * dt) - math.sqrt(a * dt))
             q0 += w * tail[N_MODES + j, 0]
             q1 += w * tail[N_MODES + j, 1]
@@ -402,9 +426,10 @@ def age_jumps(meta, tail, dt, n_window, tail_time, tail_weight):
     for j in range(N_JUMPS):
         a = meta[META_JUMPS + j]
         if a >= 0:
-            meta[META_JUMPS + j] = a + 1
-            if a + 1 >= n_window:
-                f0, f1, f2 = _fold_jump(meta, tail, j, a + 1, dt, tail_time, tail_weight)
+            a += AGE_TICKS
+            meta[META_JUMPS + j] = a
+            if a >= n_window * AGE_TICKS:
+                f0, f1, f2 = _fold_jump(meta, tail, j, a / AGE_TICKS, dt, tail_time, tail_weight)
                 s0 += f0
                 s1 += f1
                 s2 += f2

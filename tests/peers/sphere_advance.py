@@ -27,7 +27,7 @@ def step_particles(f, coef, bed, seed, st, w, hc, lo, hi, t, dt, top):
     for p in range(lo, hi):
         if st.status[p] != OK:
             continue
-        _bed_check_body(st, w, p, t, dt, bed, seed)
+        _bed_check_body(f, coef, hc, st, w, p, t, dt, bed, seed)
         if st.pos[p, 1] > top:
             st.above_top[p] += 1
 

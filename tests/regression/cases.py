@@ -52,6 +52,15 @@ def stale_counters() -> dict:
     if not STALE_COUNTERS_FILE.exists():
         return {}
     return json.loads(STALE_COUNTERS_FILE.read_text()).get("stale_counters", {})
+
+
+def stale_cases() -> dict:
+    """{case: why} of this machine's reference: whole cases that an intended physics change,
+    recorded on another machine, made stale here (the same file, "stale_cases"; the legacy
+    reference lists its own in reference.json). Not compared until re-recorded here."""
+    if not STALE_COUNTERS_FILE.exists():
+        return {}
+    return json.loads(STALE_COUNTERS_FILE.read_text()).get("stale_cases", {})
 D = 0.69e-3
 
 

@@ -72,13 +72,17 @@ def main():
     if sidecar == STALE_COUNTERS_FILE and sidecar.exists():
         # the re-recorded cases' counters are current again (cases.stale_counters)
         doc = json.loads(sidecar.read_text())
-        stale = {k: v for k, v in doc.get("stale_counters", {}).items() if k not in (args.cases or CASES)}
-        if stale:
-            doc["stale_counters"] = stale
-            sidecar.write_text(json.dumps(doc, indent=2) + "\n")
+        left = {}
+        for part in ("stale_counters", "stale_cases"):
+            stale = {k: v for k, v in doc.get(part, {}).items() if k not in (args.cases or CASES)}
+            doc.pop(part, None)
+            if stale:
+                doc[part] = left[part] = stale
+        if left:
+            sidecar.write_text(json.dumps(doc, indent=2, ensure_ascii=False) + "\n")
         else:
             sidecar.unlink()
-        print("stale counters left:", sorted(stale) or "none")
+        print("stale counters and cases left:", {k: sorted(v) for k, v in left.items()} or "none")
 
 
 if __name__ == "__main__":
