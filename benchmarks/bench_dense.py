@@ -668,9 +668,15 @@ def sweep_estimate(rows, path, threads=1):
                 t0 not in (None, tau) or t1 not in (None, tau))
 
     sw = load_sweep(path)
+    measured_dts = sorted({round(r["dt_particle"], 12) for r in rows if "dt_particle" in r})
     cases = []
     for sc in sw.cases:
         case = load_case(sc.tables, sc.values)
+        if measured_dts and measured_dts != [round(case.dt_particle, 12)]:
+            raise SystemExit(f"{path}: its case {sc.name} runs at dt = {case.dt_particle:g} d/u*, the measurements at "
+                             f"{', '.join(f'{x:g}' for x in measured_dts)} d/u*: the cost per grain-step depends on dt "
+                             "(the contact phase's work per step grows with it); measure at the sweep's dt, or give "
+                             "--sweep a sweep at the measured dt")
         c_pct = 100.0 * case.concentration
         us, interp, full, factor, other_tau = cost_us(c_pct, round(case.tau_ratio, 2))
         core_s = case.n_particles * case.n_steps * us * 1e-6
@@ -865,6 +871,7 @@ TARGET_GRAIN_STEPS = 2.7e5  # grain-steps/s
 TARGET_CONTACTS_OVER_FREE = 3.0  # contact phase / free flight, the same run
 TARGET_SWEEP_DAYS = 5.0
 TARGET_SPINUP_S = 1.0  # s simulated: the dense near-bed layer forms over ~1 s
+TARGET_DT = 0.02  # d/u*: the issue's case; a grain-step at another dt covers another time
 
 
 def print_targets(rows, est):
@@ -875,7 +882,8 @@ def print_targets(rows, est):
     x = r["runs"].get("1") if r else None
     formed = r is not None and r["spinup_s_simulated"] >= 0.99 * TARGET_SPINUP_S  # to the nearest step
     reduced = r is None or r.get("domain") != "paper"  # the targets' case is the reduced one
-    mark = lambda ok: ("met" if ok else "MISSED") if formed and reduced else "not comparable"  # noqa: E731
+    same_dt = r is None or abs(r.get("dt_particle", TARGET_DT) - TARGET_DT) < 1e-12
+    mark = lambda ok: ("met" if ok else "MISSED") if formed and reduced and same_dt else "not comparable"  # noqa: E731
     mark_est = lambda ok: ("met" if ok else "MISSED") if formed else "not comparable"  # noqa: E731
     print("\nTargets (issue 19), this run:")
     if x is None:
@@ -886,6 +894,11 @@ def print_targets(rows, est):
         if not formed:
             print(f"  (spin-up {r['spinup_s_simulated']:.3g} s < {TARGET_SPINUP_S:g} s: the dense near-bed layer has "
                   f"not formed, so this is not the state the targets are for)")
+        if not same_dt:
+            dt = r["dt_particle"]
+            print(f"  (dt = {dt:g} d/u*: the per-step targets are for the issue's case at {TARGET_DT:g} d/u*; per "
+                  f"simulated time this run's one thread does {x['grain_steps_per_s'] * dt / TARGET_DT:.3g} grain-steps "
+                  f"of {TARGET_DT:g} d/u* per second)")
         gs, ratio = x["grain_steps_per_s"], x["contacts_us"] / x["free_flight_us"]
         print(f"  C = {TARGET_C} %, one thread: {gs:.3g} grain-steps/s against >= {TARGET_GRAIN_STEPS:.3g}: "
               f"{mark(gs >= TARGET_GRAIN_STEPS)}")

@@ -129,3 +129,25 @@ def test_rows_with_and_without_a_flow_intensity_mix(bench):
     at = {x["tau_ratio"]: x["us_per_grain_step"] for x in bench.sweep_estimate(rows, bench.FULL)["cases"]
           if round(x["concentration_pct"], 2) == 3.94}
     assert at == {1.79: 7.5, 2.43: 6.0, 2.67: 7.5}
+
+
+def test_a_run_at_another_time_step_is_not_the_targets_case(bench, capsys):
+    """The per-step targets are for the issue's case at dt = 0.02 d/u*: a grain-step at
+    0.01 covers half the time, so a run there is not judged against them; its per-time
+    equivalent is printed."""
+    rows = [{**r, "dt_particle": 0.01} for r in _rows(3.4e5, 2.0, 1.0)]
+    out = _lines(bench, capsys, rows, 4.0)
+    assert "dt = 0.01 d/u*" in out[1] and "1.7e+05 grain-steps of 0.02 d/u* per second" in out[1]
+    assert [x.rsplit(": ", 1)[1] for x in out[2:]] == ["not comparable", "not comparable", "met"]
+    rows = [{**r, "dt_particle": 0.02} for r in _rows(3.4e5, 2.0, 1.0)]
+    out = _lines(bench, capsys, rows, 4.0)
+    assert [x.rsplit(": ", 1)[1] for x in out[1:]] == ["met", "met", "met"]
+
+
+def test_the_estimate_refuses_measurements_at_another_time_step(bench):
+    sweep = Path(__file__).resolve().parents[1] / "cases" / "concentration_sweep.toml"  # dt 0.02
+    rows = [{**_measured(c, 2.0, "reduced"), "dt_particle": 0.01} for c in (0.52, 3.94)]
+    with pytest.raises(SystemExit, match="measure at the sweep's dt"):
+        bench.sweep_estimate(rows, sweep)
+    rows = [{**_measured(c, 2.0, "reduced"), "dt_particle": 0.02} for c in (0.52, 3.94)]
+    assert bench.sweep_estimate(rows, sweep)["core_s"] > 0

@@ -51,9 +51,13 @@ def test_one_sphere_grain_is_the_sphere_integrator():
     clusters.advance_clusters(ds.arrays, coef, BED, 0, cst, cw, hc, 0.0, DT, 800, top)
     assert st.impacts.sum() >= 5  # bed impacts were part of the comparison
     assert np.array_equal(st.impacts, cst.impacts)
-    assert np.abs(st.pos - cst.pos).max() < 1e-6
-    assert np.abs(st.vel - cst.vel).max() < 1e-6
-    assert np.abs(st.spin - cst.omega).max() < 1e-6
+    # the two rebound formulas (bed.virtual vs the rigid-body impulse) differ in rounding:
+    # ~2e-9 after the first impact, amplified by each later one (30 here). Measured:
+    # 7.8e-7 in x, 3.3e-6 in u with the second-order impact (flight/spheres._bed_impact),
+    # 5.9e-8 and 9.2e-8 with the linear one it replaced
+    assert np.abs(st.pos - cst.pos).max() < 1e-5
+    assert np.abs(st.vel - cst.vel).max() < 1e-5
+    assert np.abs(st.spin - cst.omega).max() < 1e-5
     m = st.jump_buf_n.min()
     assert np.allclose(st.jump_buf[:, :m], cst.jump_buf[:, :m], atol=1e-6)
 

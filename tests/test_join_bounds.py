@@ -6,7 +6,8 @@ lose a contact or change the bits), and they should be tight (that is their poin
 import numpy as np
 from numba import njit
 
-from saltation.contacts.phase import _first_bed, _first_touch, _hermite, _path_gap
+from saltation.contacts.phase import _first_bed, _first_touch, _path_gap
+from saltation.flight.path import hermite_point
 
 DT = 0.02
 BOX = np.array([40.0, 10.0, 40.0])
@@ -15,7 +16,7 @@ S = np.linspace(0.0, 1.0, 4097)
 
 
 def _path(x0, x1, u0, u1):
-    """The Hermite path at S (phase._hermite's formula, vectorised; spot-checked below)."""
+    """The Hermite path at S (flight.path.hermite_point's formula, vectorised; spot-checked below)."""
     s = S[:, None]
     h00, h10, h01, h11 = 2 * s**3 - 3 * s**2 + 1, s**3 - 2 * s**2 + s, -2 * s**3 + 3 * s**2, s**3 - s**2
     return h00 * x0 + h01 * x1 + DT * (h10 * u0 + h11 * u1)
@@ -47,7 +48,7 @@ def test_the_vectorised_path_is_the_phase_s():
         np.array([11.0, -6.0, 5.0])
     p = _path(x0, x1, u0, u1)
     for k in (0, 1000, 2048, 4096):
-        np.testing.assert_allclose(p[k], [_hermite(x0[c], x1[c], u0[c], u1[c], S[k], DT)[0] for c in range(3)],
+        np.testing.assert_allclose(p[k], [hermite_point(x0[c], x1[c], u0[c], u1[c], S[k], DT)[0] for c in range(3)],
                                    rtol=0, atol=1e-14)
 
 

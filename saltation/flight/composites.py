@@ -69,10 +69,10 @@ C_b = Σ c_k J_kᵀ J_k; one 6×6 solve per grain and step. All components resta
 memory together at release and at every bed impact (physics/history.py explains why).
 
 Bed (virtual rough bed, bed/virtual.py). The grain touches the bed when its lowest component
-sphere's bottom reaches y = 0. The crossing is located by linear interpolation within
-the step (centre of mass moved back along v, orientation turned back by Ω; first order in
-Δt — spheres now find it on the step's Hermite path and fly the rest of the step with the
-fluid forces, flight/spheres._bed_impact), the contact normal n is drawn by ``bed.virtual.virtual_bed_normal`` from the
+sphere's bottom reaches y = 0. The crossing is located on the step's path, second order in
+Δt as for spheres (``_bed_impact``: the lowest component's bottom as a cubic Hermite in
+time; the centre's Hermite path, Ω linear, the orientation turned back by Ω; the rest of
+the step flown with the fluid forces), the contact normal n is drawn by ``bed.virtual.virtual_bed_normal`` from the
 velocity of that component's centre, and the impulse acts at the contact point
 r_c = R r_k − (d_k/2) n with the rigid-body collision matrix
 K = 1/m − [r_c]× I_w⁻¹ [r_c]× (rigid mass and inertia, no added mass — as the sphere
@@ -125,16 +125,18 @@ from ..physics.forces import (
     drag_factor,
 )
 from ..physics.history import (
+    AGE_TICKS,
     META_COUNT,
     _advance,
     _integral3,
     age_jumps,
-    history_mark_impact,
+    history_mark_impact_at,
     history_start_step,
     jump_impulse,
 )
 from ..physics.rng import uniform2
 from ..physics.spin import SPIN_TABLE_C, _spin_row
+from .path import first_below, hermite_point
 
 NX = 13  # x(3) v(3) q(4) Ω(3)
 SQRT_PI = math.sqrt(math.pi)
@@ -824,20 +826,55 @@ def _world_inverse_inertia(st, w, p, iw):
             iw[i, j] = s
 
 
+@njit(cache=True, no_cfunc_wrapper=True, inline="always", error_model="numpy", _nrt=False)
+def _rotated(q0, q1, q2, q3, r0, r1, r2):
+    """The body vector r turned by the unit quaternion q (world frame)."""
+    t0 = 2.0 * (q2 * r2 - q3 * r1)
+    t1 = 2.0 * (q3 * r0 - q1 * r2)
+    t2 = 2.0 * (q1 * r1 - q2 * r0)
+    return (r0 + q0 * t0 + q2 * t2 - q3 * t1, r1 + q0 * t1 + q3 * t0 - q1 * t2,
+            r2 + q0 * t2 + q1 * t1 - q2 * t0)
+
+
 @njit(cache=True, no_cfunc_wrapper=True, _nrt=False, error_model="numpy")
-def _bed_impact(st, w, p, t, dt, y_old, y_new, bed, seed):
-    """Rebound of grain p on the virtual bed at its lowest component (module docstring)."""
-    frac = 1.0
-    if y_old - y_new > 0.0:
-        frac = min(max(y_old / (y_old - y_new), 0.0), 1.0)
-    back = (1.0 - frac) * dt
+def _bottom(st, k, px, py, q0, q1, q2, q3, vy, o0, o2):
+    """Height of component k's bottom above the bed top, and its vertical speed, for the
+    grain's centre height py, orientation q and velocity (vy, Ω)."""
+    rx, ry, rz = _rotated(q0, q1, q2, q3, st.r_body[k, 0], st.r_body[k, 1], st.r_body[k, 2])
+    return py + ry - 0.5 * st.d_comp[k], vy + o2 * rx - o0 * rz
+
+
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False, error_model="numpy")
+def _bed_impact(f, coef, hc, st, w, p, t, dt, crossed, kb, bed, seed):
+    """Rebound of grain p on the virtual bed at its lowest component kb (module docstring).
+    ``crossed``: kb's bottom came down through the bed top in this step, else it touches
+    it at the step's end (grazing). As for spheres (flight/spheres._bed_impact), second
+    order: the hit is where kb's bottom, a cubic Hermite in time through its heights and
+    vertical speeds at the step's ends (flight/path.py), reaches the bed top; the centre's
+    position and velocity there are its Hermite path's, Ω linear between the ends, the
+    orientation turned back from the end by Ω over the rest of the step; after the
+    impulse the rest of the step is flown with the fluid forces (``_flight_remainder``)."""
     x = w.x[p]
-    for i in range(3):
-        x[i] = st.pos[p, i] - back * st.vel[p, i]
+    s = 1.0
+    if crossed:
+        x0 = w.x0[p]
+        h0, v0 = _bottom(st, kb, x0[0], x0[1], x0[6], x0[7], x0[8], x0[9], x0[4], x0[10], x0[12])
+        h1, v1 = _bottom(st, kb, st.pos[p, 0], st.pos[p, 1], st.quat[p, 0], st.quat[p, 1], st.quat[p, 2],
+                         st.quat[p, 3], st.vel[p, 1], st.omega[p, 0], st.omega[p, 2])
+        s = first_below(h0, h1, v0, v1, dt, 0.0)
+        for i in range(3):
+            x[i], x[3 + i] = hermite_point(x0[i], st.pos[p, i], x0[3 + i], st.vel[p, i], s, dt)
+            x[10 + i] = (1.0 - s) * x0[10 + i] + s * st.omega[p, i]
+    else:
+        for i in range(3):
+            x[i] = st.pos[p, i]
+            x[3 + i] = st.vel[p, i]
+            x[10 + i] = st.omega[p, i]
+    back = (1.0 - s) * dt
     for i in range(4):
         x[6 + i] = st.quat[p, i]
     _rotate_quat(x, st.omega[p], -back)
-    t_hit = t + frac * dt
+    t_hit = t + s * dt
     low, kb = _lowest(st, w, p, x[0], x[1], x[2], x[6], x[7], x[8], x[9])
     x[1] -= low  # the lowest point exactly on the bed top at the hit
     # a re-touch within a step of the last contact (a grazing contact closed at the end of
@@ -845,6 +882,15 @@ def _bed_impact(st, w, p, t, dt, y_old, y_new, bed, seed):
     # episode: its impulse is applied, but it ends no jump (bed/jumps.py)
     close_jump(st, p, st.jump_t0[p], x[0] - st.jump_x0[p], st.jump_ymax[p], t_hit,
                bed[BED_MIN_JUMP_DURATION], bed[BED_MIN_JUMP_HEIGHT])
+    st.jump_t0[p] = t_hit
+    st.jump_x0[p] = x[0]
+    nq = math.sqrt(x[6] * x[6] + x[7] * x[7] + x[8] * x[8] + x[9] * x[9])
+    for i in range(3):
+        st.pos[p, i] = x[i]
+        st.vel[p, i] = x[3 + i]
+        st.omega[p, i] = x[10 + i]
+    for i in range(4):
+        st.quat[p, i] = x[6 + i] / nq
     rot = w.rot[p]  # orientation at the hit (set by _lowest)
     rx = rot[0, 0] * st.r_body[kb, 0] + rot[0, 1] * st.r_body[kb, 1] + rot[0, 2] * st.r_body[kb, 2]
     ry = rot[1, 0] * st.r_body[kb, 0] + rot[1, 1] * st.r_body[kb, 1] + rot[1, 2] * st.r_body[kb, 2]
@@ -858,33 +904,118 @@ def _bed_impact(st, w, p, t, dt, y_old, y_new, bed, seed):
     xi1, xi2 = uniform2(seed, p, st.impacts[p])
     virtual_bed_normal(uc, xi1, xi2, bed[2], n)
     iw = w.aug[p, 0:3, 0:3]
-    for i in range(4):
-        st.quat[p, i] = x[6 + i]
     _world_inverse_inertia(st, w, p, iw)
     rad = 0.5 * st.d_comp[kb]
     n0, n1, n2 = n[0], n[1], n[2]
+    v0, v1, v2 = st.vel[p, 0], st.vel[p, 1], st.vel[p, 2]
+    w0, w1, w2 = o[0], o[1], o[2]
     _impulse(st, p, rx - rad * n0, ry - rad * n1, rz - rad * n2, n0, n1, n2, bed[0], bed[1], iw)
     # second impact on the horizontal bed if the contact point still descends (bed.virtual.bed_rebound)
     cy = st.vel[p, 1] + st.omega[p, 2] * rx - st.omega[p, 0] * rz
     if cy < 0.0:
         _impulse(st, p, rx, ry - rad, rz, 0.0, 1.0, 0.0, bed[0], bed[1], iw)
     st.impacts[p] += 1
-    for i in range(3):
-        x[i] += back * st.vel[p, i]
-    _rotate_quat(x, st.omega[p], back)
-    nq = math.sqrt(x[6] * x[6] + x[7] * x[7] + x[8] * x[8] + x[9] * x[9])
-    for i in range(3):
-        st.pos[p, i] = x[i]
-    for i in range(4):
-        st.quat[p, i] = x[6 + i] / nq
-    st.jump_t0[p] = t_hit
-    st.jump_x0[p] = x[0] - back * st.vel[p, 0]
+    if s < 1.0:
+        _flight_remainder(f, coef, hc, st, w, p, t_hit, back, st.vel[p, 0] - v0, st.vel[p, 1] - v1,
+                          st.vel[p, 2] - v2, o[0] - w0, o[1] - w1, o[2] - w2)
     low2, _ = _lowest(st, w, p, st.pos[p, 0], st.pos[p, 1], st.pos[p, 2], st.quat[p, 0], st.quat[p, 1],
                       st.quat[p, 2], st.quat[p, 3])
     st.jump_ymax[p] = max(low2, 0.0)
     st.fresh[p] = 0
+    ticks = int(round((1.0 - s) * AGE_TICKS))
     for k in range(st.cstart[p], st.cstart[p + 1]):
-        history_mark_impact(st.hist_meta[k])  # the next step takes the slip step (physics/history.py)
+        history_mark_impact_at(st.hist_meta[k], ticks)  # the next step takes the slip step (physics/history.py)
+
+
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False, error_model="numpy")
+def _flight_remainder(f, coef, hc, st, w, p, t, h, dv0, dv1, dv2, dw0, dw1, dw2):
+    """Grain p from its rebound at t to the step's end, t + h, by one RK4 step with its
+    fluid forces (``_rk4_stages``); with ``forces.basset_impacts = "keep"`` the history
+    held at the step's end (``st.hist_i``) and the impulse of each component's slip step
+    Δu_k = Δv + ΔΩ × r_k over h, −c_k Δu_k · 2√h through the grain's mass matrix (as
+    flight/spheres._flight_remainder); with "restart" none. The lowest point ends no lower
+    than the bed top."""
+    keep = coef[ON_BASSET] != 0.0 and hc.keep_impacts
+    x0 = w.x0[p]
+    for i in range(3):
+        x0[i] = st.pos[p, i]
+        x0[3 + i] = st.vel[p, i]
+        x0[10 + i] = st.omega[p, i]
+    for i in range(4):
+        x0[6 + i] = st.quat[p, i]
+    _sample_grain(f, coef, st, w, p, x0, t)
+    if not _rk4_stages(f, coef, st, w, p, t, h, keep):
+        return
+    if keep:
+        _quat_to_matrix(st.quat[p, 0], st.quat[p, 1], st.quat[p, 2], st.quat[p, 3], w.rot[p])
+        rot = w.rot[p]
+        rhs = w.ft[p]
+        for i in range(6):
+            rhs[i] = 0.0
+        scale = 2.0 * math.sqrt(h) / math.sqrt(coef[RE_STAR])
+        for k in range(st.cstart[p], st.cstart[p + 1]):
+            rx, ry, rz = _rotated(st.quat[p, 0], st.quat[p, 1], st.quat[p, 2], st.quat[p, 3], st.r_body[k, 0],
+                                  st.r_body[k, 1], st.r_body[k, 2])
+            e0 = dv0 + dw1 * rz - dw2 * ry
+            e1 = dv1 + dw2 * rx - dw0 * rz
+            e2 = dv2 + dw0 * ry - dw1 * rx
+            c = 1.5 * SQRT_PI * st.d_comp[k] ** 2 * scale
+            eb0 = rot[0, 0] * e0 + rot[1, 0] * e1 + rot[2, 0] * e2
+            eb1 = rot[0, 1] * e0 + rot[1, 1] * e1 + rot[2, 1] * e2
+            eb2 = rot[0, 2] * e0 + rot[1, 2] * e1 + rot[2, 2] * e2
+            bx, by, bz = st.r_body[k, 0], st.r_body[k, 1], st.r_body[k, 2]
+            rhs[0] -= c * eb0
+            rhs[1] -= c * eb1
+            rhs[2] -= c * eb2
+            rhs[3] -= c * (by * eb2 - bz * eb1)
+            rhs[4] -= c * (bz * eb0 - bx * eb2)
+            rhs[5] -= c * (bx * eb1 - by * eb0)
+        aug = w.aug[p]
+        mm = st.mmat[p]
+        for i in range(6):
+            for j in range(6):
+                aug[i, j] = mm[i, j]
+            aug[i, 6] = rhs[i]
+        vb = w.vec[p]
+        _solve6(aug, vb)
+        for i in range(3):
+            st.vel[p, i] += rot[i, 0] * vb[0] + rot[i, 1] * vb[1] + rot[i, 2] * vb[2]
+            st.omega[p, i] += rot[i, 0] * vb[3] + rot[i, 1] * vb[4] + rot[i, 2] * vb[5]
+    low, _ = _lowest(st, w, p, st.pos[p, 0], st.pos[p, 1], st.pos[p, 2], st.quat[p, 0], st.quat[p, 1],
+                     st.quat[p, 2], st.quat[p, 3])
+    if low < 0.0:
+        st.pos[p, 1] -= low
+
+
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False, error_model="numpy")
+def _rk4_stages(f, coef, st, w, p, t, dt, with_basset):
+    """RK4 of grain p over dt from the state in ``w.x0[p]``, its fluid there already
+    sampled, the history held (``with_basset``); the result into st (orientation
+    normalised). Returns False (and marks the grain) when it is not finite."""
+    x0 = w.x0[p]
+    x = w.x[p]
+    k = w.k[p]
+    _rhs(coef, st, w, p, x0, k[0], with_basset)
+    for stage in range(1, 4):
+        h = 0.5 * dt if stage < 3 else dt
+        for i in range(NX):
+            x[i] = x0[i] + h * k[stage - 1, i]
+        _sample_grain(f, coef, st, w, p, x, t + h)
+        _rhs(coef, st, w, p, x, k[stage], with_basset)
+    for i in range(NX):
+        x[i] = x0[i] + dt / 6.0 * (k[0, i] + 2.0 * k[1, i] + 2.0 * k[2, i] + k[3, i])
+    nq = math.sqrt(x[6] * x[6] + x[7] * x[7] + x[8] * x[8] + x[9] * x[9])
+    for i in range(3):
+        st.pos[p, i] = x[i]
+        st.vel[p, i] = x[3 + i]
+        st.omega[p, i] = x[10 + i]
+    for i in range(4):
+        st.quat[p, i] = x[6 + i] / nq
+    for i in range(NX):
+        if not np.isfinite(x[i]):
+            st.status[p] = NOT_FINITE
+            return False
+    return True
 
 
 @njit(cache=True, no_cfunc_wrapper=True, _nrt=False, error_model="numpy")
@@ -892,8 +1023,6 @@ def step_grain(f, coef, bed, seed, st, w, hc, p, t, dt):
     """One RK4 step of composite grain p from t to t + dt, with bed impacts."""
     with_basset = coef[ON_BASSET] != 0.0
     x0 = w.x0[p]
-    x = w.x[p]
-    k = w.k[p]
     for i in range(3):
         x0[i] = st.pos[p, i]
         x0[3 + i] = st.vel[p, i]
@@ -922,26 +1051,9 @@ def step_grain(f, coef, bed, seed, st, w, hc, p, t, dt):
             sl[2] = x0[5] + ox * ry - oy * rx - w.uf[kk, 2]
             history_start_step(sl, st.hist_slip[kk], st.hist_meta[kk], st.hist_tail[kk], st.hist_i[kk], dt,
                                hc.keep_impacts, hc.tail_time, hc.tail_weight)
-    _rhs(coef, st, w, p, x0, k[0], with_basset)
-    for stage in range(1, 4):
-        h = 0.5 * dt if stage < 3 else dt
-        for i in range(NX):
-            x[i] = x0[i] + h * k[stage - 1, i]
-        _sample_grain(f, coef, st, w, p, x, t + h)
-        _rhs(coef, st, w, p, x, k[stage], with_basset)
-    for i in range(NX):
-        x[i] = x0[i] + dt / 6.0 * (k[0, i] + 2.0 * k[1, i] + 2.0 * k[2, i] + k[3, i])
-    nq = math.sqrt(x[6] * x[6] + x[7] * x[7] + x[8] * x[8] + x[9] * x[9])
-    for i in range(3):
-        st.pos[p, i] = x[i]
-        st.vel[p, i] = x[3 + i]
-        st.omega[p, i] = x[10 + i]
-    for i in range(4):
-        st.quat[p, i] = x[6 + i] / nq
-    for i in range(NX):
-        if not np.isfinite(x[i]):
-            st.status[p] = NOT_FINITE
-            return
+    if not _rk4_stages(f, coef, st, w, p, t, dt, with_basset):
+        return
+    x = w.x[p]
     _sample_grain(f, coef, st, w, p, x, t + dt)  # next step's stage 1; closes the history
     for i in range(4):
         x[6 + i] = st.quat[p, i]
@@ -960,13 +1072,13 @@ def step_grain(f, coef, bed, seed, st, w, hc, p, t, dt):
         # vertical velocity of the lowest component's centre
         vy = st.vel[p, 1] + st.omega[p, 2] * rx - st.omega[p, 0] * rz
         if vy < 0.0 and y_old >= 0.0:
-            _bed_impact(st, w, p, t, dt, y_old, y_new, bed, seed)
+            _bed_impact(f, coef, hc, st, w, p, t, dt, True, kb, bed, seed)
         else:
             # grazing contact without a descending crossing: keep the grain on the bed
             st.pos[p, 1] -= y_new
             st.fresh[p] = 0
             if vy < 0.0:
-                _bed_impact(st, w, p, t, dt, 0.0, 0.0, bed, seed)
+                _bed_impact(f, coef, hc, st, w, p, t, dt, False, kb, bed, seed)
             y_new = 0.0
     else:
         if y_new > st.jump_ymax[p]:

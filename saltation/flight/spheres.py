@@ -462,7 +462,8 @@ def _bed_impact(f, coef, hc, st, w, p, t, dt, crossed, bed, seed):
 def _flight_remainder(f, coef, hc, st, w, p, t, h, du0, du1, du2):
     """Grain p from its rebound at t to the step's end, t + h (h < Δt), by one RK4 step with
     its fluid forces (``_rk4_move``). The history force: with ``forces.basset_impacts =
-    "keep"`` the flight's part held as in the step's stages (−P I_n) and the impulse of
+    "keep"`` the flight's part held at its value at the step's end (−P I_{n+1}, the
+    history closed before the bed pass) and the impulse of
     the rebound's own slip step Δu over the rest of the step, −P Δu · 2√h (its exact
     integral of Δu/√(t − t_c), physics/history.py); with "restart" none (the memory starts
     afresh at the impact). Ends no lower than the bed top (a weak rebound under gravity:
@@ -475,9 +476,10 @@ def _flight_remainder(f, coef, hc, st, w, p, t, h, du0, du1, du2):
     spin = st.spin[p]
     _save_start(st, w, p)
     keep = coef[ON_BASSET] != 0.0 and hc.keep_impacts
-    if not keep:
-        for i in range(3):
-            w.basset[p, i] = 0.0
+    for i in range(3):
+        w.basset[p, i] = 0.0
+    if keep:
+        add_basset_acceleration(coef[BASSET_PREFACTOR], st.hist_i[p], w.basset[p])
     uf, grad, dudt, vort, uf_top, uf_bot = _fluid_rows(w, p)
     fluid_at_grain(f, re_star, pos[0], pos[1], pos[2], t, with_lift, uf, grad, dudt, vort, uf_top, uf_bot,
                    with_gradient)
