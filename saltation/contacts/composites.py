@@ -132,6 +132,7 @@ from ..flight.composites import (
     _quat_to_matrix,
     chunk_range,
     free_flight_pass,
+    state_row,
 )
 from ..flight.path import hermite_weights
 from ..grains.refs import as_tuple, struct_ref
@@ -331,12 +332,7 @@ def _reach(sr, wr, cr, dt):
 def _reach_one(st, w, cc, p, dt):
     x0 = w.x0[p]
     x1 = cc.x1[p]
-    for i in range(3):
-        x1[i] = st.pos[p, i]
-        x1[3 + i] = st.vel[p, i]
-        x1[10 + i] = st.omega[p, i]
-    for i in range(4):
-        x1[6 + i] = st.quat[p, i]
+    state_row(st, p, x1)
     chord = 0.0
     b0 = 0.0
     b1 = 0.0

@@ -593,6 +593,22 @@ def _accelerations(st, w, p, x, ft):
         ft[21 + i] = rot[i, 0] * ft[15] + rot[i, 1] * ft[16] + rot[i, 2] * ft[17]
 
 
+@njit(cache=True, no_cfunc_wrapper=True, inline="always", error_model="numpy", _nrt=False)
+def _subtract_wrench(rhs, rot, r, c, e0, e1, e2):
+    """rhs[0:6] −= c J_kᵀ e in the body frame: the force c e (world) on a component at body
+    offset r, as (e, r × e) with e turned into the body frame by rotᵀ."""
+    eb0 = rot[0, 0] * e0 + rot[1, 0] * e1 + rot[2, 0] * e2
+    eb1 = rot[0, 1] * e0 + rot[1, 1] * e1 + rot[2, 1] * e2
+    eb2 = rot[0, 2] * e0 + rot[1, 2] * e1 + rot[2, 2] * e2
+    rx, ry, rz = r[0], r[1], r[2]
+    rhs[0] -= c * eb0
+    rhs[1] -= c * eb1
+    rhs[2] -= c * eb2
+    rhs[3] -= c * (ry * eb2 - rz * eb1)
+    rhs[4] -= c * (rz * eb0 - rx * eb2)
+    rhs[5] -= c * (rx * eb1 - ry * eb0)
+
+
 @njit(cache=True, no_cfunc_wrapper=True, _nrt=False, error_model="numpy")
 def _basset_end_step(coef, st, w, hc, p, dt):
     """Implicit newest-sample closure of the history force for the rigid grain (module
@@ -638,18 +654,7 @@ def _basset_end_step(coef, st, w, hc, p, dt):
         st.hist_i[k, 0] = i0 + f0
         st.hist_i[k, 1] = i1 + f1
         st.hist_i[k, 2] = i2 + f2
-        # body frame, J_kᵀ e = (e, r × e)
-        eb0 = rot[0, 0] * e0 + rot[1, 0] * e1 + rot[2, 0] * e2
-        eb1 = rot[0, 1] * e0 + rot[1, 1] * e1 + rot[2, 1] * e2
-        eb2 = rot[0, 2] * e0 + rot[1, 2] * e1 + rot[2, 2] * e2
-        rx, ry, rz = st.r_body[k, 0], st.r_body[k, 1], st.r_body[k, 2]
-        c = h * ck
-        rhs[0] -= c * eb0
-        rhs[1] -= c * eb1
-        rhs[2] -= c * eb2
-        rhs[3] -= c * (ry * eb2 - rz * eb1)
-        rhs[4] -= c * (rz * eb0 - rx * eb2)
-        rhs[5] -= c * (rx * eb1 - ry * eb0)
+        _subtract_wrench(rhs, rot, st.r_body[k], h * ck, e0, e1, e2)
     for i in range(6):
         for j in range(6):
             aug[i, j] = mm[i, j] + h * g0 * cb[i, j]
@@ -827,6 +832,30 @@ def _world_inverse_inertia(st, w, p, iw):
 
 
 @njit(cache=True, no_cfunc_wrapper=True, inline="always", error_model="numpy", _nrt=False)
+def state_row(st, p, x):
+    """Grain p's state into the row x (x, v, q, Ω; NX): the start of an RK4 step, or the
+    end of a free path (contacts/composites.py)."""
+    for i in range(3):
+        x[i] = st.pos[p, i]
+        x[3 + i] = st.vel[p, i]
+        x[10 + i] = st.omega[p, i]
+    for i in range(4):
+        x[6 + i] = st.quat[p, i]
+
+
+@njit(cache=True, no_cfunc_wrapper=True, inline="always", error_model="numpy", _nrt=False)
+def _set_state(st, p, x):
+    """Grain p's state from the row x (x, v, q, Ω; NX), its orientation normalised."""
+    nq = math.sqrt(x[6] * x[6] + x[7] * x[7] + x[8] * x[8] + x[9] * x[9])
+    for i in range(3):
+        st.pos[p, i] = x[i]
+        st.vel[p, i] = x[3 + i]
+        st.omega[p, i] = x[10 + i]
+    for i in range(4):
+        st.quat[p, i] = x[6 + i] / nq
+
+
+@njit(cache=True, no_cfunc_wrapper=True, inline="always", error_model="numpy", _nrt=False)
 def _rotated(q0, q1, q2, q3, r0, r1, r2):
     """The body vector r turned by the unit quaternion q (world frame)."""
     t0 = 2.0 * (q2 * r2 - q3 * r1)
@@ -884,13 +913,7 @@ def _bed_impact(f, coef, hc, st, w, p, t, dt, crossed, kb, bed, seed):
                bed[BED_MIN_JUMP_DURATION], bed[BED_MIN_JUMP_HEIGHT])
     st.jump_t0[p] = t_hit
     st.jump_x0[p] = x[0]
-    nq = math.sqrt(x[6] * x[6] + x[7] * x[7] + x[8] * x[8] + x[9] * x[9])
-    for i in range(3):
-        st.pos[p, i] = x[i]
-        st.vel[p, i] = x[3 + i]
-        st.omega[p, i] = x[10 + i]
-    for i in range(4):
-        st.quat[p, i] = x[6 + i] / nq
+    _set_state(st, p, x)
     rot = w.rot[p]  # orientation at the hit (set by _lowest)
     rx = rot[0, 0] * st.r_body[kb, 0] + rot[0, 1] * st.r_body[kb, 1] + rot[0, 2] * st.r_body[kb, 2]
     ry = rot[1, 0] * st.r_body[kb, 0] + rot[1, 1] * st.r_body[kb, 1] + rot[1, 2] * st.r_body[kb, 2]
@@ -937,12 +960,7 @@ def _flight_remainder(f, coef, hc, st, w, p, t, h, dv0, dv1, dv2, dw0, dw1, dw2)
     than the bed top."""
     keep = coef[ON_BASSET] != 0.0 and hc.keep_impacts
     x0 = w.x0[p]
-    for i in range(3):
-        x0[i] = st.pos[p, i]
-        x0[3 + i] = st.vel[p, i]
-        x0[10 + i] = st.omega[p, i]
-    for i in range(4):
-        x0[6 + i] = st.quat[p, i]
+    state_row(st, p, x0)
     _sample_grain(f, coef, st, w, p, x0, t)
     if not _rk4_stages(f, coef, st, w, p, t, h, keep):
         return
@@ -959,17 +977,7 @@ def _flight_remainder(f, coef, hc, st, w, p, t, h, dv0, dv1, dv2, dw0, dw1, dw2)
             e0 = dv0 + dw1 * rz - dw2 * ry
             e1 = dv1 + dw2 * rx - dw0 * rz
             e2 = dv2 + dw0 * ry - dw1 * rx
-            c = 1.5 * SQRT_PI * st.d_comp[k] ** 2 * scale
-            eb0 = rot[0, 0] * e0 + rot[1, 0] * e1 + rot[2, 0] * e2
-            eb1 = rot[0, 1] * e0 + rot[1, 1] * e1 + rot[2, 1] * e2
-            eb2 = rot[0, 2] * e0 + rot[1, 2] * e1 + rot[2, 2] * e2
-            bx, by, bz = st.r_body[k, 0], st.r_body[k, 1], st.r_body[k, 2]
-            rhs[0] -= c * eb0
-            rhs[1] -= c * eb1
-            rhs[2] -= c * eb2
-            rhs[3] -= c * (by * eb2 - bz * eb1)
-            rhs[4] -= c * (bz * eb0 - bx * eb2)
-            rhs[5] -= c * (bx * eb1 - by * eb0)
+            _subtract_wrench(rhs, rot, st.r_body[k], 1.5 * SQRT_PI * st.d_comp[k] ** 2 * scale, e0, e1, e2)
         aug = w.aug[p]
         mm = st.mmat[p]
         for i in range(6):
@@ -1004,13 +1012,7 @@ def _rk4_stages(f, coef, st, w, p, t, dt, with_basset):
         _rhs(coef, st, w, p, x, k[stage], with_basset)
     for i in range(NX):
         x[i] = x0[i] + dt / 6.0 * (k[0, i] + 2.0 * k[1, i] + 2.0 * k[2, i] + k[3, i])
-    nq = math.sqrt(x[6] * x[6] + x[7] * x[7] + x[8] * x[8] + x[9] * x[9])
-    for i in range(3):
-        st.pos[p, i] = x[i]
-        st.vel[p, i] = x[3 + i]
-        st.omega[p, i] = x[10 + i]
-    for i in range(4):
-        st.quat[p, i] = x[6 + i] / nq
+    _set_state(st, p, x)
     for i in range(NX):
         if not np.isfinite(x[i]):
             st.status[p] = NOT_FINITE
@@ -1023,12 +1025,7 @@ def step_grain(f, coef, bed, seed, st, w, hc, p, t, dt):
     """One RK4 step of composite grain p from t to t + dt, with bed impacts."""
     with_basset = coef[ON_BASSET] != 0.0
     x0 = w.x0[p]
-    for i in range(3):
-        x0[i] = st.pos[p, i]
-        x0[3 + i] = st.vel[p, i]
-        x0[10 + i] = st.omega[p, i]
-    for i in range(4):
-        x0[6 + i] = st.quat[p, i]
+    state_row(st, p, x0)
     y_old, _ = _lowest(st, w, p, x0[0], x0[1], x0[2], x0[6], x0[7], x0[8], x0[9])
     if st.fresh[p] == 0:
         _sample_grain(f, coef, st, w, p, x0, t)
