@@ -379,7 +379,7 @@ def _drive_prescribed_slip(slip_of_t, steps, dt, n_steps, n_window=10, impacts="
             if phi == 0.0:
                 H.history_mark_impact(me)
             else:
-                H.history_mark_impact_at(me, int(round(phi * H.AGE_TICKS)))
+                H.history_mark_impact_at(me, phi)
         # the impact comes after a step's end: the slip at a step's start is post-impact,
         # the sample that closes the step before it pre-impact
         H.history_start_step(slip_of_t(t, True).copy(), sh, me, ta, i_hist, dt, co.keep_impacts, co.tail_time,

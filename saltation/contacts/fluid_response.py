@@ -35,7 +35,7 @@ import math
 from numba import njit, prange
 
 from ..physics.forces import BASSET_PREFACTOR, ON_BASSET, weight_and_drag
-from ..physics.history import AGE_TICKS, history_mark_impact_at
+from ..physics.history import history_mark_impact_at
 
 __all__ = ["fluid_response"]
 
@@ -59,7 +59,7 @@ def _respond(coef, keep, vel, uf, deviation, hist_meta, g, dt):
         v0 -= kick * du0
         v1 -= kick * du1
         v2 -= kick * du2
-        history_mark_impact_at(hist_meta[g], int(round(tau / dt * AGE_TICKS)))
+        history_mark_impact_at(hist_meta[g], tau / dt)
     vel[g, 0], vel[g, 1], vel[g, 2] = v0, v1, v2
 
 

@@ -125,7 +125,6 @@ from ..physics.forces import (
     drag_factor,
 )
 from ..physics.history import (
-    AGE_TICKS,
     META_COUNT,
     _advance,
     _integral3,
@@ -884,6 +883,7 @@ def _bed_impact(f, coef, hc, st, w, p, t, dt, crossed, kb, bed, seed):
     orientation turned back from the end by Ω over the rest of the step; after the
     impulse the rest of the step is flown with the fluid forces (``_flight_remainder``)."""
     x = w.x[p]
+    state_row(st, p, x)
     s = 1.0
     if crossed:
         x0 = w.x0[p]
@@ -894,14 +894,7 @@ def _bed_impact(f, coef, hc, st, w, p, t, dt, crossed, kb, bed, seed):
         for i in range(3):
             x[i], x[3 + i] = hermite_point(x0[i], st.pos[p, i], x0[3 + i], st.vel[p, i], s, dt)
             x[10 + i] = (1.0 - s) * x0[10 + i] + s * st.omega[p, i]
-    else:
-        for i in range(3):
-            x[i] = st.pos[p, i]
-            x[3 + i] = st.vel[p, i]
-            x[10 + i] = st.omega[p, i]
     back = (1.0 - s) * dt
-    for i in range(4):
-        x[6 + i] = st.quat[p, i]
     _rotate_quat(x, st.omega[p], -back)
     t_hit = t + s * dt
     low, kb = _lowest(st, w, p, x[0], x[1], x[2], x[6], x[7], x[8], x[9])
@@ -945,9 +938,8 @@ def _bed_impact(f, coef, hc, st, w, p, t, dt, crossed, kb, bed, seed):
                       st.quat[p, 2], st.quat[p, 3])
     st.jump_ymax[p] = max(low2, 0.0)
     st.fresh[p] = 0
-    ticks = int(round((1.0 - s) * AGE_TICKS))
     for k in range(st.cstart[p], st.cstart[p + 1]):
-        history_mark_impact_at(st.hist_meta[k], ticks)  # the next step takes the slip step (physics/history.py)
+        history_mark_impact_at(st.hist_meta[k], 1.0 - s)  # the next step takes the slip step (physics/history.py)
 
 
 @njit(cache=True, no_cfunc_wrapper=True, _nrt=False, error_model="numpy")

@@ -47,7 +47,6 @@ from ..physics.forces import (
     weight_and_drag,
 )
 from ..physics.history import (
-    AGE_TICKS,
     META_COUNT,
     add_basset_acceleration,
     history_end_step,
@@ -455,7 +454,7 @@ def _bed_impact(f, coef, hc, st, w, p, t, dt, crossed, bed, seed):
     st.jump_ymax[p] = pos[1]
     st.fresh[p] = 0  # moved: the fluid must be sampled again
     # the next step takes the slip step, dated at the impact (physics/history.py)
-    history_mark_impact_at(st.hist_meta[p], int(round((1.0 - s) * AGE_TICKS)))
+    history_mark_impact_at(st.hist_meta[p], 1.0 - s)
 
 
 @njit(cache=True, no_cfunc_wrapper=True, error_model="numpy", _nrt=False)

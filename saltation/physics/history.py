@@ -310,11 +310,12 @@ def history_reset(slip0, slip_hist, meta, tail):
 
 
 @njit(cache=True, no_cfunc_wrapper=True, _nrt=False)
-def history_mark_impact_at(meta, ticks):
-    """An impact or contact changed the grain's velocity impulsively, ``ticks`` (of
-    AGE_TICKS per step) before the end of the step: the next step takes the slip step into
-    the history with that age, or restarts it (``history_start_step``). Two in one step
-    make one slip step, dated by the earlier."""
+def history_mark_impact_at(meta, age):
+    """An impact or contact changed the grain's velocity impulsively, ``age`` (a fraction
+    of the step, in [0, 1]) before the end of the step: the next step takes the slip step
+    into the history with that age (kept in ticks, AGE_TICKS per step), or restarts it
+    (``history_start_step``). Two in one step make one slip step, dated by the earlier."""
+    ticks = int(round(age * AGE_TICKS))
     if meta[META_COUNT] > 0:
         meta[META_COUNT] = -meta[META_COUNT]
         meta[META_PENDING] = ticks
@@ -326,7 +327,7 @@ def history_mark_impact_at(meta, ticks):
 def history_mark_impact(meta):
     """``history_mark_impact_at`` the end of the step (a contact resolved inside the
     step, a packed-bed impact: dated at the step's end)."""
-    history_mark_impact_at(meta, 0)
+    history_mark_impact_at(meta, 0.0)
 
 
 @njit(cache=True, no_cfunc_wrapper=True, _nrt=False)
