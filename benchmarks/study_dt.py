@@ -183,6 +183,7 @@ def main(argv=None):
     ap.add_argument("--spinup", type=float, default=0.5)
     ap.add_argument("--shrink", type=float, default=1.0)
     ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--bed", choices=("virtual", "packed"), default="virtual", help="bed.model of every run")
     a = ap.parse_args(argv)
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -191,20 +192,20 @@ def main(argv=None):
     if "free" in a.sets:
         tb = base_tables(a.shrink)
         ov = {"collisions.model": "off", "run.n_particles": a.n_free, "run.duration": a.free_duration,
-              "run.seed": a.seed, "run.threads": 1}
+              "run.seed": a.seed, "run.threads": 1, "bed.model": a.bed}
         res = run_set("free", tb, dts, ov, 0.0, out)
-        t, r, v = analyse("free flight (contacts off)", res)
+        t, r, v = analyse(f"free flight (contacts off, {a.bed} bed)", res)
         text.append(t), rows.extend(r)
         verdicts["free"] = v
     if "contacts" in a.sets:
         tb = base_tables(a.shrink)
         k_def = default_stiffness(tb)
-        ov = point_overrides(k_def, a.factor, a.conc, a.seed, a.duration)
+        ov = {**point_overrides(k_def, a.factor, a.conc, a.seed, a.duration), "bed.model": a.bed}
         res = run_set("contacts", tb, dts, ov, a.spinup, out)
         t, r, v = analyse(f"soft contacts, C = {100 * a.conc:.2f} %, k_n = {a.factor:g} × k_default", res)
         text.append(t), rows.extend(r)
         verdicts["contacts"] = v
-    header = f"τ*/τ*c = 1.79, seed {a.seed}, domain shrink {a.shrink}"
+    header = f"τ*/τ*c = 1.79, seed {a.seed}, domain shrink {a.shrink}, {a.bed} bed"
     print(header)
     print("\n".join(text))
     (out / "dt.md").write_text(header + "\n" + "\n".join(text) + "\n")

@@ -43,7 +43,8 @@ def _run(st, w, coef, bed, pb, n_steps, check=None):
     hits = 0
     for s in range(n_steps):
         clusters.advance_clusters(flow.arrays, coef, bed, 0, st, w, hc, s * DT, DT, 1, 1e30)
-        hits += cluster_bed.packed_bed_pass(st, w, s * DT, DT, s, bed, pb, last, np.zeros(len(last), np.uint8))
+        hits += cluster_bed.packed_bed_pass(flow.arrays, coef, hc, st, w, s * DT, DT, s, bed, pb, last,
+                                            np.zeros(len(last), np.uint8))
         if check is not None:
             check(s)
     return hits

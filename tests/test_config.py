@@ -439,6 +439,11 @@ def test_time_step_must_resolve_response_time():
     # d = 0.1 mm: τ_p ≈ 1.1 ms; dt = 0.5 ms = 0.048 d/u* passes rule (2) but not rule (1)
     fine = base(particle={"diameter": 1e-4}, run={"dt": 5e-4})
     assert "does not resolve the grain's response time" in error_of(fine)
+    # a finer grain with no time step in the case: the error says the default was refused,
+    # and what to give instead
+    msg = error_of(base(particle={"diameter": 5e-5}))
+    assert "run.dt_particle (not in the case: the default, 0.02 d/u*) does not resolve" in msg
+    assert "give run.dt_particle <= 0.008928" in msg
     # the step in particle units must stay ≤ 0.05 d/u*
     msg = error_of(base(run={"dt_particle": 0.08}))
     assert "run.dt_particle = 0.08 is too coarse" in msg and "0.05 d/u*" in msg

@@ -441,7 +441,7 @@ def test_a_step_inside_a_time_step_is_dated_where_it_happened():
     """A slip step at t_c = t_n − φΔt (an impact at a fraction 1 − φ of the step before
     t_n, marked with its age φ): the kernels give the impulse from t_n on,
     2Δ(√(t − t_c) − √(φΔt)); the part before t_n, 2Δ√(φΔt), is the caller's
-    (flight/spheres._flight_remainder). Dated at t_n instead (the old rule) the impulse
+    (flight/spheres.flight_remainder). Dated at t_n instead (the old rule) the impulse
     would be 2Δ√(t − t_n): off by ~2Δ√(φΔt) right after the impact."""
     delta = np.array([-1.2, 0.8, 0.3])
     dt, n_c, phi = 0.02, 25, 0.37

@@ -10,15 +10,21 @@ point along the real normal, with the rigid-body collision matrix of flight/comp
 velocity, sticking and sliding branches — SPEC §4's rebound for a sphere).
 
 After a grain's move in a step (free flight, then grain–grain contacts) from its start
-to (x₁, q₁) with end velocities (v, Ω):
-1. every component whose centre is within reach of a bed sphere is run back along its
-   own velocity u_k = v + Ω × r_k (linear, as for spheres) to the time of entry τ (the
-   positive root of |a − τ u_k| = ½ + d_k/2); the component entered first (largest τ)
-   is the contact;
-2. the whole grain is moved back by τ (x − τ v, q turned by −τ Ω), the normal is
-   n = (x_k − c)/|x_k − c| there, the impulse is applied at r_c = R r_k − (d_k/2) n,
-   and the grain moves on for τ with its new (v, Ω); repeated for a second contact in
-   the remaining τ, at most ``MAX_BOUNCES`` times per step;
+(x₀, v₀, q₀, Ω₀) to (x₁, v₁, q₁, Ω₁):
+1. every component whose centre ends within reach (½ + d_k/2) of a bed sphere is followed
+   on its path in the step, the cubic Hermite through its centre x + R r_k and velocity
+   u_k = v + Ω × R r_k at both ends (flight/path.py), to where it first came within reach
+   (``bed.packed.path_entry``); the component that did so first is the contact;
+2. the grain is put where it was then, as on the virtual bed (flight.composites._bed_impact):
+   its centre's position and velocity on its Hermite path, Ω linear between the ends, q
+   turned back from q₁ by Ω₁ over the rest of the step, then moved along the normal so that
+   the component just touches; the normal is n = (x_k − c)/|x_k − c|, the impulse acts at
+   r_c = R r_k − (d_k/2) n, and the rest of the step is flown with the fluid forces
+   (flight.composites.flight_remainder, the slip steps dated at the impact); repeated on
+   the rest of the step's path for a second contact, at most ``MAX_BOUNCES`` times per step.
+   (Before: the contact by running the grain back linearly along its end velocities, the
+   rest of the step in a straight line without forces: first order in Δt; 500 grains of
+   the natural mixture, Δt = 0.02 against 0.0025: L −5.3 ± 1.3 %, 11 % more jumps.)
 3. residual overlaps (a grain that started the step in reach, a resting grain pressed
    down) are removed by translating the grain along the normal of each overlapped
    component–bed pair in turn (a few Gauss–Seidel sweeps): velocities unchanged, and no
@@ -50,12 +56,17 @@ from ..flight.composites import (
     _lowest,
     _quat_to_matrix,
     _rotate_quat,
+    _rotated,
+    _set_state,
     _world_inverse_inertia,
     chunk_range,
+    flight_remainder,
+    state_row,
 )
+from ..flight.path import hermite_point
 from ..grains.refs import as_tuple
-from ..physics.history import history_mark_impact
-from .packed import BED_CENTRE_Y, _nearest_entry, bed_cell, bed_offset, bed_stencil_cell, end_jump
+from ..physics.history import history_mark_impact_at
+from .packed import BED_CENTRE_Y, bed_cell, bed_offset, bed_stencil_cell, end_jump, path_entry
 
 MAX_BOUNCES = 4  # impulses per grain and step at most
 PUSH_SWEEPS = 8  # Gauss–Seidel sweeps that remove residual overlaps
@@ -77,44 +88,35 @@ def _component_world(st, w, p, k):
 
 
 @njit(cache=True, no_cfunc_wrapper=True, _nrt=False, error_model="numpy")
-def _first_entry(st, w, p, pb, limit):
-    """(component, bed sphere, τ) of the contact entered first within ``limit`` for grain
-    p at its current state (w.rot[p] must hold its orientation); bed sphere −1: none."""
-    v = st.vel[p]
-    o = st.omega[p]
-    best_k = -1
-    best_j = -1
-    best_tau = -1.0
-    for k in range(st.cstart[p], st.cstart[p + 1]):
-        rx, ry, rz = _component_world(st, w, p, k)
-        reach = BED_RADIUS + 0.5 * st.d_comp[k]
-        y = st.pos[p, 1] + ry
-        if y - BED_CENTRE_Y >= reach:
-            continue
-        j, tau = _nearest_entry(pb, st.pos[p, 0] + rx, y, st.pos[p, 2] + rz,
-                                v[0] + o[1] * rz - o[2] * ry, v[1] + o[2] * rx - o[0] * rz,
-                                v[2] + o[0] * ry - o[1] * rx, limit, reach)
-        if j >= 0 and tau > best_tau:
-            best_tau = tau
-            best_j = j
-            best_k = k
-    return best_k, best_j, best_tau
+def _component_at(st, p, k, x):
+    """Centre and velocity of component k for the grain state in the row x (x, v, q, Ω)."""
+    rx, ry, rz = _rotated(x[6], x[7], x[8], x[9], st.r_body[k, 0], st.r_body[k, 1], st.r_body[k, 2])
+    return ((x[0] + rx, x[1] + ry, x[2] + rz),
+            (x[3] + x[11] * rz - x[12] * ry, x[4] + x[12] * rx - x[10] * rz, x[5] + x[10] * ry - x[11] * rx))
 
 
 @njit(cache=True, no_cfunc_wrapper=True, _nrt=False, error_model="numpy")
-def _move(st, w, p, h):
-    """Rigid motion of grain p over time h (negative: back) with its current (v, Ω)."""
-    x = w.x[p]
-    for i in range(4):
-        x[6 + i] = st.quat[p, i]
-    _rotate_quat(x, st.omega[p], h)
-    nq = math.sqrt(x[6] * x[6] + x[7] * x[7] + x[8] * x[8] + x[9] * x[9])
-    for i in range(4):
-        st.quat[p, i] = x[6 + i] / nq
-    for i in range(3):
-        st.pos[p, i] += h * st.vel[p, i]
-    q = st.quat[p]
-    _quat_to_matrix(q[0], q[1], q[2], q[3], w.rot[p])
+def _first_entry(st, w, p, pb, h):
+    """(component, bed sphere, s, the sphere centre's image) of the contact that grain p's
+    segment (from the row ``w.x0[p]`` to the row ``w.x[p]``, over h) entered first;
+    bed sphere −1: none (module docstring, 1)."""
+    best_k = -1
+    best_j = -1
+    best_s = 2.0
+    c0 = c1 = c2 = 0.0
+    for k in range(st.cstart[p], st.cstart[p + 1]):
+        reach = BED_RADIUS + 0.5 * st.d_comp[k]
+        x1, u1 = _component_at(st, p, k, w.x[p])
+        if x1[1] - BED_CENTRE_Y >= reach:
+            continue
+        x0, u0 = _component_at(st, p, k, w.x0[p])
+        j, s, b0, b1, b2 = path_entry(pb, x0, x1, u0, u1, h, reach)
+        if j >= 0 and s < best_s:
+            best_s = s
+            best_j = j
+            best_k = k
+            c0, c1, c2 = b0, b1, b2
+    return best_k, best_j, best_s, c0, c1, c2
 
 
 @njit(cache=True, no_cfunc_wrapper=True, _nrt=False, error_model="numpy")
@@ -159,10 +161,12 @@ def _push_out(st, w, p, pb):
 
 
 @njit(cache=True, no_cfunc_wrapper=True, _nrt=False, error_model="numpy")
-def packed_bed_check_cluster(st, w, p, t, dt, step, bed, pb, last_contact):
-    """Impacts of composite p on the packed bed after its move in step ``step``
-    (t → t + dt); module docstring. bed = (e, f, ...). last_contact (N,) int64: the last
-    step in which the grain touched the bed. Returns the number of impulses applied."""
+def packed_bed_check_cluster(f, coef, hc, st, w, p, t, dt, step, bed, pb, last_contact):
+    """Impacts of composite p on the packed bed after its move in step ``step`` (t → t + dt)
+    from ``w.x0[p]``; module docstring. f, coef, hc: the flow, force and history
+    coefficients of the free flight (the rest of the step after an impact is flown with
+    them). bed = (e, f, ...). last_contact (N,) int64: the last step in which the grain
+    touched the bed. Returns the number of impulses applied."""
     q = st.quat[p]
     low, _ = _lowest(st, w, p, st.pos[p, 0], st.pos[p, 1], st.pos[p, 2], q[0], q[1], q[2], q[3])
     if low >= 0.0:  # lowest point above the bed spheres' tops: out of reach
@@ -172,33 +176,49 @@ def packed_bed_check_cluster(st, w, p, t, dt, step, bed, pb, last_contact):
     e = bed[0]
     fr = bed[1]
     iw = w.aug[p, 0:3, 0:3]
-    remaining = dt
+    x = w.x[p]
+    t_seg = t  # the segment flown last: from the row w.x0[p] at t_seg to the step's end
     hits = 0
     for _it in range(MAX_BOUNCES):
-        k, j, tau = _first_entry(st, w, p, pb, remaining)
+        h = t + dt - t_seg
+        state_row(st, p, x)  # the segment's end
+        k, j, s, c0, c1, c2 = _first_entry(st, w, p, pb, h)
         if j < 0:
             break
-        _move(st, w, p, -tau)  # back to the contact
+        # the grain where the contact began (module docstring, 2); x keeps the end
+        x0 = w.x0[p]
+        for i in range(3):
+            st.pos[p, i], st.vel[p, i] = hermite_point(x0[i], x[i], x0[3 + i], x[3 + i], s, h)
+            st.omega[p, i] = (1.0 - s) * x0[10 + i] + s * x[10 + i]
+        back = (1.0 - s) * h
+        q0, q1, q2, q3 = x[6], x[7], x[8], x[9]
+        _rotate_quat(x, x[10:13], -back)
+        nq = math.sqrt(x[6] * x[6] + x[7] * x[7] + x[8] * x[8] + x[9] * x[9])
+        for i in range(4):
+            st.quat[p, i] = x[6 + i] / nq
+        x[6], x[7], x[8], x[9] = q0, q1, q2, q3
+        _quat_to_matrix(st.quat[p, 0], st.quat[p, 1], st.quat[p, 2], st.quat[p, 3], w.rot[p])
         rx, ry, rz = _component_world(st, w, p, k)
         reach = BED_RADIUS + 0.5 * st.d_comp[k]
-        ax, ay, az = bed_offset(pb, j, st.pos[p, 0] + rx, st.pos[p, 1] + ry, st.pos[p, 2] + rz)
+        ax, ay, az = st.pos[p, 0] + rx - c0, st.pos[p, 1] + ry - c1, st.pos[p, 2] + rz - c2
         r = math.sqrt(ax * ax + ay * ay + az * az)
         if r == 0.0:
             ax, ay, az, r = 0.0, 1.0, 0.0, 1.0
         n0, n1, n2 = ax / r, ay / r, az / r
-        if r < reach:  # entered before the step began (clipped τ): onto the surface
-            s = reach - r
-            st.pos[p, 0] += s * n0
-            st.pos[p, 1] += s * n1
-            st.pos[p, 2] += s * n2
+        gap = reach - r  # onto the surface (the grain's and the component's paths differ at O(h³))
+        st.pos[p, 0] += gap * n0
+        st.pos[p, 1] += gap * n1
+        st.pos[p, 2] += gap * n2
         _world_inverse_inertia(st, w, p, iw)
         rad = 0.5 * st.d_comp[k]
+        v0, v1, v2 = st.vel[p, 0], st.vel[p, 1], st.vel[p, 2]
+        w0, w1, w2 = st.omega[p, 0], st.omega[p, 1], st.omega[p, 2]
         if _impulse(st, p, rx - rad * n0, ry - rad * n1, rz - rad * n2, n0, n1, n2, e, fr, iw) == 0:
-            _move(st, w, p, tau)  # touching but separating: on to the end of the step
+            _set_state(st, p, x)  # touching but separating: the segment's end stands
             break
         hits += 1
         st.impacts[p] += 1
-        t_hit = t + dt - tau
+        t_hit = t_seg + s * h
         if hits == 1:
             if last_contact[p] < step - 1:
                 # airborne since an earlier step: a jump ends here (SPEC §6)
@@ -206,13 +226,19 @@ def packed_bed_check_cluster(st, w, p, t, dt, step, bed, pb, last_contact):
             st.jump_t0[p] = t_hit
             st.jump_x0[p] = st.pos[p, 0]
         for kk in range(st.cstart[p], st.cstart[p + 1]):
-            history_mark_impact(st.hist_meta[kk])  # the next step takes the slip step (physics/history.py)
-        _move(st, w, p, tau)
-        remaining = tau
-        if remaining <= 0.0:
+            # the slip steps dated at the impact (physics/history.py)
+            history_mark_impact_at(st.hist_meta[kk], (t + dt - t_hit) / dt)
+        if s < 1.0:
+            flight_remainder(f, coef, hc, st, w, p, t_hit, back, st.vel[p, 0] - v0, st.vel[p, 1] - v1,
+                             st.vel[p, 2] - v2, st.omega[p, 0] - w0, st.omega[p, 1] - w1, st.omega[p, 2] - w2)
+            if st.status[p] != OK:
+                return hits
+        t_seg = t_hit
+        if s >= 1.0:
             break
-    touched = _push_out(st, w, p, pb)
     q = st.quat[p]
+    _quat_to_matrix(q[0], q[1], q[2], q[3], w.rot[p])
+    touched = _push_out(st, w, p, pb)
     low, _ = _lowest(st, w, p, st.pos[p, 0], st.pos[p, 1], st.pos[p, 2], q[0], q[1], q[2], q[3])
     if hits > 0 or touched:
         last_contact[p] = step
@@ -228,7 +254,7 @@ def packed_bed_check_cluster(st, w, p, t, dt, step, bed, pb, last_contact):
 
 
 @njit(cache=True, no_cfunc_wrapper=True, parallel=True, error_model="numpy")
-def packed_bed_pass(st, w, t, dt, step, bed, pb, last_contact, skip):
+def packed_bed_pass(f, coef, hc, st, w, t, dt, step, bed, pb, last_contact, skip):
     """packed_bed_check_cluster for every grain (in parallel) but those with skip[p] ≠ 0
     (the contact phase's sub-stepped grains, which had their bed contacts there as soft
     contacts: contacts/composites.py); returns the impulses."""
@@ -240,7 +266,7 @@ def packed_bed_pass(st, w, t, dt, step, bed, pb, last_contact, skip):
         hits = 0
         for p in range(*chunk_range(c, n)):
             if sv.status[p] == OK and skip[p] == 0:
-                hits += packed_bed_check_cluster(sv, wv, p, t, dt, step, bed, pb, last_contact)
+                hits += packed_bed_check_cluster(f, coef, hc, sv, wv, p, t, dt, step, bed, pb, last_contact)
         total += hits
     return total
 

@@ -561,6 +561,7 @@ class RunConfig(_Table):
     def __post_init__(self):
         if self.dt is None and self.dt_particle is None:
             object.__setattr__(self, "dt_particle", DEFAULT_DT_PARTICLE)
+            object.__setattr__(self, "dt_defaulted", True)  # (said so in the time-step errors)
         super().__post_init__()
 
     def _check(self):
@@ -919,13 +920,16 @@ class Case:
 
         dt_key = "dt" if self.run.dt is not None else "dt_particle"
         given = f"run.{dt_key} = {getattr(self.run, dt_key)!r}"
+        if getattr(self.run, "dt_defaulted", False):
+            given = f"run.dt_particle (not in the case: the default, {DEFAULT_DT_PARTICLE:g} d/u*)"
         limit = self.response_time / RESPONSE_TIME_STEPS
         if self.dt > limit * (1 + 1e-12):
             raise CaseError(
                 f"{given} does not resolve the grain's response time: dt = {self.dt:.4g} s must "
                 f"be <= τ_p/{RESPONSE_TIME_STEPS} = {limit:.4g} s "
                 f"({limit / self.time_scale:.4g} d/u*), τ_p = (ρp/ρ + Cm) d²/(18 ν f) with "
-                f"Yen's drag factor f at a slip of {RESPONSE_SLIP:g} u*", "run", dt_key)
+                f"Yen's drag factor f at a slip of {RESPONSE_SLIP:g} u*; give run.dt_particle <= "
+                f"{limit / self.time_scale:.4g} (or run.dt <= {limit:.4g})", "run", dt_key)
         if self.dt_particle > MAX_DT_PARTICLE * (1 + 1e-12):
             raise CaseError(
                 f"{given} is too coarse: dt = {self.dt_particle:.4g} d/u* must be <= "

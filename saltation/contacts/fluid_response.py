@@ -22,7 +22,7 @@ After the phase, for each grain with a contact (``ph.deviation``):
 * the Basset history (``forces.basset_impacts = "keep"``): the slip step δu dated τ before
   the step's end (physics/history.py, ``history_mark_impact_at``), and its impulse over
   that time, −P δu · 2√τ, added to its velocity, as at a virtual-bed impact
-  (flight/spheres._flight_remainder).
+  (flight/spheres.flight_remainder).
 
 The other fluid forces (lift, added mass, fluid acceleration, Magnus) respond to δu too;
 drag is by far the largest part of the response for sand in water and the only one

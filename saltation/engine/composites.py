@@ -199,14 +199,15 @@ class ClusterSimulation(Simulation):
         skip = self.cc.active if self.cc is not None else np.zeros(self.n, np.uint8)
         if n == 0:  # compile call: nothing moves
             self._advance_flight(f, st, w, seed, t0, 0)
-            cluster_bed.packed_bed_pass(st, w, t0, self.dt, step0 - 1, self.bed, self.pb, self.last_contact,
-                                        np.ones(self.n, np.uint8))
+            cluster_bed.packed_bed_pass(f, self.coef, self.hist_coef, st, w, t0, self.dt, step0 - 1, self.bed, self.pb,
+                                        self.last_contact, np.ones(self.n, np.uint8))
             return 0
         for s in range(n):
             t = (step0 + s) * self.dt  # from the global step index (as the kernels)
             done = self._advance_flight(f, st, w, seed, t, 1)
             c0 = time.perf_counter()
-            cluster_bed.packed_bed_pass(st, w, t, self.dt, step0 + s, self.bed, self.pb, self.last_contact, skip)
+            cluster_bed.packed_bed_pass(f, self.coef, self.hist_coef, st, w, t, self.dt, step0 + s, self.bed, self.pb,
+                                        self.last_contact, skip)
             self.bed_s += time.perf_counter() - c0
             if done < 1 or np.any(st.status != clusters.OK) or np.any(st.jump_buf_n >= cap):
                 return s + 1

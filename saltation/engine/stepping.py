@@ -111,7 +111,7 @@ def _bed_range(f, coef, hc, st, w, lo, hi, t, dt, step, bed, virtual, packed, pb
             if virtual is not None:
                 _bed_check_body(f, coef, hc, st, w, p, t, dt, bed, virtual.seed)
             if packed is not None:
-                packed_bed_check_particle(st, w, p, t, dt, step, bed, pb, last_contact)
+                packed_bed_check_particle(f, coef, hc, st, w, p, t, dt, step, bed, pb, last_contact)
         if st.pos[p, 1] > top:
             st.above_top[p] += 1
 

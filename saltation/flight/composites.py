@@ -881,7 +881,7 @@ def _bed_impact(f, coef, hc, st, w, p, t, dt, crossed, kb, bed, seed):
     vertical speeds at the step's ends (flight/path.py), reaches the bed top; the centre's
     position and velocity there are its Hermite path's, Ω linear between the ends, the
     orientation turned back from the end by Ω over the rest of the step; after the
-    impulse the rest of the step is flown with the fluid forces (``_flight_remainder``)."""
+    impulse the rest of the step is flown with the fluid forces (``flight_remainder``)."""
     x = w.x[p]
     state_row(st, p, x)
     s = 1.0
@@ -932,8 +932,12 @@ def _bed_impact(f, coef, hc, st, w, p, t, dt, crossed, kb, bed, seed):
         _impulse(st, p, rx, ry - rad, rz, 0.0, 1.0, 0.0, bed[0], bed[1], iw)
     st.impacts[p] += 1
     if s < 1.0:
-        _flight_remainder(f, coef, hc, st, w, p, t_hit, back, st.vel[p, 0] - v0, st.vel[p, 1] - v1,
-                          st.vel[p, 2] - v2, o[0] - w0, o[1] - w1, o[2] - w2)
+        flight_remainder(f, coef, hc, st, w, p, t_hit, back, st.vel[p, 0] - v0, st.vel[p, 1] - v1,
+                         st.vel[p, 2] - v2, o[0] - w0, o[1] - w1, o[2] - w2)
+        low, _ = _lowest(st, w, p, st.pos[p, 0], st.pos[p, 1], st.pos[p, 2], st.quat[p, 0], st.quat[p, 1],
+                         st.quat[p, 2], st.quat[p, 3])
+        if low < 0.0:
+            st.pos[p, 1] -= low  # a weak rebound under gravity: no lower than the bed top
     low2, _ = _lowest(st, w, p, st.pos[p, 0], st.pos[p, 1], st.pos[p, 2], st.quat[p, 0], st.quat[p, 1],
                       st.quat[p, 2], st.quat[p, 3])
     st.jump_ymax[p] = max(low2, 0.0)
@@ -943,13 +947,13 @@ def _bed_impact(f, coef, hc, st, w, p, t, dt, crossed, kb, bed, seed):
 
 
 @njit(cache=True, no_cfunc_wrapper=True, _nrt=False, error_model="numpy")
-def _flight_remainder(f, coef, hc, st, w, p, t, h, dv0, dv1, dv2, dw0, dw1, dw2):
+def flight_remainder(f, coef, hc, st, w, p, t, h, dv0, dv1, dv2, dw0, dw1, dw2):
     """Grain p from its rebound at t to the step's end, t + h, by one RK4 step with its
     fluid forces (``_rk4_stages``); with ``forces.basset_impacts = "keep"`` the history
     held at the step's end (``st.hist_i``) and the impulse of each component's slip step
     Δu_k = Δv + ΔΩ × r_k over h, −c_k Δu_k · 2√h through the grain's mass matrix (as
-    flight/spheres._flight_remainder); with "restart" none. The lowest point ends no lower
-    than the bed top."""
+    flight/spheres.flight_remainder); with "restart" none. Leaves the post-impulse state in
+    ``w.x0[p]`` (the start of the path it flew)."""
     keep = coef[ON_BASSET] != 0.0 and hc.keep_impacts
     x0 = w.x0[p]
     state_row(st, p, x0)
@@ -981,10 +985,6 @@ def _flight_remainder(f, coef, hc, st, w, p, t, h, dv0, dv1, dv2, dw0, dw1, dw2)
         for i in range(3):
             st.vel[p, i] += rot[i, 0] * vb[0] + rot[i, 1] * vb[1] + rot[i, 2] * vb[2]
             st.omega[p, i] += rot[i, 0] * vb[3] + rot[i, 1] * vb[4] + rot[i, 2] * vb[5]
-    low, _ = _lowest(st, w, p, st.pos[p, 0], st.pos[p, 1], st.pos[p, 2], st.quat[p, 0], st.quat[p, 1],
-                     st.quat[p, 2], st.quat[p, 3])
-    if low < 0.0:
-        st.pos[p, 1] -= low
 
 
 @njit(cache=True, no_cfunc_wrapper=True, _nrt=False, error_model="numpy")

@@ -416,7 +416,7 @@ def _bed_impact(f, coef, hc, st, w, p, t, dt, crossed, bed, seed):
     Hermite through the start and end states (flight/path.py), reaches the bed top; the
     position and velocity there are the path's, the spin linear between the ends. After
     the rebound the grain flies on for the rest of the step by one RK4 step with its fluid
-    forces (``_flight_remainder``), and the Basset history dates the slip step at the
+    forces (``flight_remainder``), and the Basset history dates the slip step at the
     impact (physics/history.py, "Impacts and contacts keep the history"). (Before: the
     contact by running the move back along the end-of-step velocity, that velocity
     rebounded, the rest of the step in a straight line without forces, the slip step dated
@@ -450,7 +450,9 @@ def _bed_impact(f, coef, hc, st, w, p, t, dt, crossed, bed, seed):
     bed_rebound(vel, spin, n, bed[0], bed[1], RADIUS)
     st.impacts[p] += 1
     if s < 1.0:
-        _flight_remainder(f, coef, hc, st, w, p, t_hit, (1.0 - s) * dt, vel[0] - du0, vel[1] - du1, vel[2] - du2)
+        flight_remainder(f, coef, hc, st, w, p, t_hit, (1.0 - s) * dt, vel[0] - du0, vel[1] - du1, vel[2] - du2)
+        if pos[1] < RADIUS:
+            pos[1] = RADIUS  # a weak rebound under gravity: the next step's bed check takes it from there
     st.jump_ymax[p] = pos[1]
     st.fresh[p] = 0  # moved: the fluid must be sampled again
     # the next step takes the slip step, dated at the impact (physics/history.py)
@@ -458,16 +460,16 @@ def _bed_impact(f, coef, hc, st, w, p, t, dt, crossed, bed, seed):
 
 
 @njit(cache=True, no_cfunc_wrapper=True, error_model="numpy", _nrt=False)
-def _flight_remainder(f, coef, hc, st, w, p, t, h, du0, du1, du2):
+def flight_remainder(f, coef, hc, st, w, p, t, h, du0, du1, du2):
     """Grain p from its rebound at t to the step's end, t + h (h < Δt), by one RK4 step with
     its fluid forces (``_rk4_move``). The history force: with ``forces.basset_impacts =
     "keep"`` the flight's part held at its value at the step's end (−P I_{n+1}, the
     history closed before the bed pass) and the impulse of
     the rebound's own slip step Δu over the rest of the step, −P Δu · 2√h (its exact
     integral of Δu/√(t − t_c), physics/history.py); with "restart" none (the memory starts
-    afresh at the impact). Ends no lower than the bed top (a weak rebound under gravity:
-    the next step's bed check takes it from there). Uses ``w.x0[p]`` for its start state:
-    the step's start is not read after the bed check."""
+    afresh at the impact). Leaves the rebound's state in ``w.x0[p]`` (the start of the
+    path it flew: the packed bed looks for a further impact on it); the step's start is
+    not read after the bed check."""
     re_star = coef[RE_STAR]
     with_lift, with_gradient = _samples_needed(coef)
     pos = st.pos[p]
@@ -492,5 +494,3 @@ def _flight_remainder(f, coef, hc, st, w, p, t, h, du0, du1, du2):
         if not (np.isfinite(pos[i]) and np.isfinite(vel[i]) and np.isfinite(spin[i])):
             st.status[p] = NOT_FINITE
             return
-    if pos[1] < RADIUS:
-        pos[1] = RADIUS
