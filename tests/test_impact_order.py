@@ -58,13 +58,14 @@ def test_packed_bed_impacts_converge_at_second_order_too(tmp_path):
 
 
 def test_composite_packed_bed_impacts_converge_at_second_order_too(tmp_path):
-    """Bonded-sphere grains (rods) on the packed bed (bed/packed_composites.py), jump 1's
-    length and duration. (Its height, the highest elevation of the tumbling grain's lowest
-    point, is sampled at the steps' ends and differs by ~6 % at Δt = 0.02 with either
-    impact rule: measured 6.2 % now, 6.4 % before.)"""
+    """Bonded-sphere grains (rods) on the packed bed (bed/packed_composites.py), jump 1. Its
+    height is the highest elevation of the tumbling grain's lowest point, sampled inside
+    each step too (flight.composites.highest_on_path); at the steps' ends only it came out
+    6.2 % off at Δt = 0.02 with either impact rule."""
     errors = _errors(tmp_path, "packed", jumps=(1,), shape="rod")
-    errors = {key: v for key, v in errors.items() if key[2] != "height"}
-    # measured: ≤ 0.15 % at 0.02 and ≤ 0.29 % at 0.04; the old rule (the grain run back
-    # linearly along its end velocities) 0.59–0.85 % and 2.4–2.8 %
-    assert max(v for (dt, _, _), v in errors.items() if dt == 0.02) < 0.004, errors
-    assert max(v for (dt, _, _), v in errors.items() if dt == 0.04) < 0.01, errors
+    # measured: length and duration ≤ 0.15 % at 0.02 and ≤ 0.25 % at 0.04, height 0.53 % and
+    # 2.0 %; the old impact rule (the grain run back linearly along its end velocities) with
+    # the heights at the steps' ends: 0.59–0.85 % and 2.4–2.8 %, heights 6.4 % and 8.9 %
+    for dt, slack in ((0.02, 1.0), (0.04, 2.5)):
+        assert max(errors[dt, 1, q] for q in ("length", "duration")) < 0.004 * slack, errors
+        assert errors[dt, 1, "height"] < 0.015 * slack, errors

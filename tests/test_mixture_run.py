@@ -83,8 +83,13 @@ def test_one_sphere_composites_reproduce_the_sphere_run(tmp_path):
     assert len(sph.jumps) == len(one.jumps) > 0
     ja = sph.jumps.sort_values(["particle", "jump"]).reset_index(drop=True)
     jb = one.jumps.sort_values(["particle", "jump"]).reset_index(drop=True)
-    for col in ("length", "height", "duration"):
+    for col in ("length", "duration"):
         assert np.abs(ja[col] - jb[col]).max() < 1e-5
+    # a composite's height is also sampled inside each step (flight.composites.highest_on_path),
+    # a sphere's at the steps' ends, which can miss the apex by the fall under the submerged
+    # weight in half a step: ≤ ½ (1/τ*) (Δt/2)², τ* = 0.0573 here
+    extra = (jb["height"] - ja["height"]).to_numpy()
+    assert extra.min() > -1e-5 and extra.max() < 0.5 / 0.0573 * 0.0025 ** 2, extra
     assert np.abs(sph.tracks[TRACK_COLS].to_numpy() - one.tracks[TRACK_COLS].to_numpy()).max() < 1e-5
 
 

@@ -61,6 +61,7 @@ from ..flight.composites import (
     _world_inverse_inertia,
     chunk_range,
     flight_remainder,
+    highest_on_path,
     state_row,
 )
 from ..flight.path import hermite_point
@@ -170,8 +171,7 @@ def packed_bed_check_cluster(f, coef, hc, st, w, p, t, dt, step, bed, pb, last_c
     q = st.quat[p]
     low, _ = _lowest(st, w, p, st.pos[p, 0], st.pos[p, 1], st.pos[p, 2], q[0], q[1], q[2], q[3])
     if low >= 0.0:  # lowest point above the bed spheres' tops: out of reach
-        if low > st.jump_ymax[p]:
-            st.jump_ymax[p] = low
+        st.jump_ymax[p] = max(st.jump_ymax[p], low, highest_on_path(st, w, p, dt))
         return 0
     e = bed[0]
     fr = bed[1]
@@ -248,8 +248,8 @@ def packed_bed_check_cluster(f, coef, hc, st, w, p, t, dt, step, bed, pb, last_c
             st.jump_t0[p] = t + dt
             st.jump_x0[p] = st.pos[p, 0]
         st.jump_ymax[p] = max(low, 0.0)
-    elif low > st.jump_ymax[p]:
-        st.jump_ymax[p] = low
+    else:
+        st.jump_ymax[p] = max(st.jump_ymax[p], low, highest_on_path(st, w, p, dt))
     return hits
 
 

@@ -132,6 +132,7 @@ from ..flight.composites import (
     _quat_to_matrix,
     chunk_range,
     free_flight_pass,
+    highest_on_path,
     state_row,
 )
 from ..flight.path import hermite_weights
@@ -1002,8 +1003,7 @@ def _finish_one(st, w, cc, p):
         # kept here, as that pass would (the free flight leaves it to the packed bed)
         q = st.quat[p]
         low, _ = _lowest(st, w, p, st.pos[p, 0], st.pos[p, 1], st.pos[p, 2], q[0], q[1], q[2], q[3])
-        if low > st.jump_ymax[p]:
-            st.jump_ymax[p] = low
+        st.jump_ymax[p] = max(st.jump_ymax[p], low, highest_on_path(st, w, p, cc.step_t[1]))
 
 
 @njit(cache=True, no_cfunc_wrapper=True, inline="always")  # inlined: one level less for the step to re-link (compile time)

@@ -338,20 +338,23 @@ def _quat_to_matrix(w, x, y, z, m):
     m[2, 2] = 1.0 - 2.0 * (x * x + y * y)
 
 
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False, inline="always")
+def _turned(w, xx, y, z, o0, o1, o2, h):
+    """exp(h Ω/2 as a rotation vector) ⊗ q for q = (w, xx, y, z), Ω = (o0, o1, o2) (world), exact."""
+    ang = h * math.sqrt(o0 * o0 + o1 * o1 + o2 * o2)
+    if ang == 0.0:
+        return w, xx, y, z
+    s = math.sin(0.5 * ang) / (ang / h)
+    c = math.cos(0.5 * ang)
+    a0, a1, a2, a3 = c, s * o0, s * o1, s * o2
+    return (a0 * w - a1 * xx - a2 * y - a3 * z, a0 * xx + a1 * w + a2 * z - a3 * y,
+            a0 * y - a1 * z + a2 * w + a3 * xx, a0 * z + a1 * y - a2 * xx + a3 * w)
+
+
 @njit(cache=True, no_cfunc_wrapper=True, _nrt=False)
 def _rotate_quat(x, o, h):
     """q ← exp(h Ω/2 as a rotation vector) ⊗ q for q = x[6:10], Ω = o (world), exact."""
-    ang = h * math.sqrt(o[0] * o[0] + o[1] * o[1] + o[2] * o[2])
-    if ang == 0.0:
-        return
-    s = math.sin(0.5 * ang) / (ang / h)
-    c = math.cos(0.5 * ang)
-    a0, a1, a2, a3 = c, s * o[0], s * o[1], s * o[2]
-    w, xx, y, z = x[6], x[7], x[8], x[9]
-    x[6] = a0 * w - a1 * xx - a2 * y - a3 * z
-    x[7] = a0 * xx + a1 * w + a2 * z - a3 * y
-    x[8] = a0 * y - a1 * z + a2 * w + a3 * xx
-    x[9] = a0 * z + a1 * y - a2 * xx + a3 * w
+    x[6], x[7], x[8], x[9] = _turned(x[6], x[7], x[8], x[9], o[0], o[1], o[2], h)
 
 
 @njit(cache=True, no_cfunc_wrapper=True, _nrt=False)
@@ -677,20 +680,55 @@ def _basset_end_step(coef, st, w, hc, p, dt):
         st.hist_i[k, 2] += g0 * s2
 
 
-@njit(cache=True, no_cfunc_wrapper=True, _nrt=False, error_model="numpy")
-def _lowest(st, w, p, px, py, pz, q0, q1, q2, q3):
-    """(lowest bottom elevation, its component) for the grain at (p·, q·)."""
-    rot = w.rot[p]
-    _quat_to_matrix(q0, q1, q2, q3, rot)
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False, error_model="numpy", inline="always")
+def _lowest_of_row(st, p, py, m10, m11, m12):
+    """(lowest bottom elevation, its component) for the grain with centre height py and the
+    rotation matrix's second row (m10, m11, m12)."""
     best = 1e300
     kb = st.cstart[p]
     for k in range(st.cstart[p], st.cstart[p + 1]):
-        y = py + rot[1, 0] * st.r_body[k, 0] + rot[1, 1] * st.r_body[k, 1] + rot[1, 2] * st.r_body[k, 2] \
-            - 0.5 * st.d_comp[k]
+        y = py + m10 * st.r_body[k, 0] + m11 * st.r_body[k, 1] + m12 * st.r_body[k, 2] - 0.5 * st.d_comp[k]
         if y < best:
             best = y
             kb = k
     return best, kb
+
+
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False, error_model="numpy")
+def _lowest(st, w, p, px, py, pz, q0, q1, q2, q3):
+    """(lowest bottom elevation, its component) for the grain at (p·, q·); the rotation
+    matrix into ``w.rot[p]``."""
+    rot = w.rot[p]
+    _quat_to_matrix(q0, q1, q2, q3, rot)
+    return _lowest_of_row(st, p, py, rot[1, 0], rot[1, 1], rot[1, 2])
+
+
+# points of a step at which the jump height is sampled: s = j/JUMP_HEIGHT_SAMPLES, j = 1..
+JUMP_HEIGHT_SAMPLES = 8
+
+
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False, error_model="numpy")
+def highest_on_path(st, w, p, dt):
+    """The highest elevation of grain p's lowest point inside its step, on its free path from
+    the row ``w.x0[p]`` to its state: at s = 1/8, 2/8, ..., 7/8 (JUMP_HEIGHT_SAMPLES), the centre
+    on its Hermite path, the orientation turned back from the end by Ω over the rest of the
+    step (as at an impact, ``_bed_impact``). A tumbling grain's lowest point swings up and
+    down within a step; sampled at the steps' ends only, the height of a rod's first jump
+    came out 3.7 % low on average at Δt = 0.02 Dn/u* (0.6 % at 0.005) against 0.00125;
+    with the seven interior samples 0.5 % (tests/test_impact_order.py)."""
+    x0 = w.x0[p]
+    q = st.quat[p]
+    o = st.omega[p]
+    best = -1e300
+    for j in range(1, JUMP_HEIGHT_SAMPLES):
+        s = j / JUMP_HEIGHT_SAMPLES
+        py = hermite_point(x0[1], st.pos[p, 1], x0[4], st.vel[p, 1], s, dt)[0]
+        q0, q1, q2, q3 = _turned(q[0], q[1], q[2], q[3], o[0], o[1], o[2], -(1.0 - s) * dt)
+        # the rotation matrix's second row (_quat_to_matrix)
+        low, _ = _lowest_of_row(st, p, py, 2.0 * (q1 * q2 + q0 * q3), 1.0 - 2.0 * (q1 * q1 + q3 * q3),
+                                2.0 * (q2 * q3 - q0 * q1))
+        best = max(best, low)
+    return best
 
 
 @njit(cache=True, no_cfunc_wrapper=True, _nrt=False, error_model="numpy")
@@ -1018,7 +1056,6 @@ def step_grain(f, coef, bed, seed, st, w, hc, p, t, dt):
     with_basset = coef[ON_BASSET] != 0.0
     x0 = w.x0[p]
     state_row(st, p, x0)
-    y_old, _ = _lowest(st, w, p, x0[0], x0[1], x0[2], x0[6], x0[7], x0[8], x0[9])
     if st.fresh[p] == 0:
         _sample_grain(f, coef, st, w, p, x0, t)
     else:
@@ -1060,7 +1097,10 @@ def step_grain(f, coef, bed, seed, st, w, hc, p, t, dt):
         rz = rot[2, 0] * st.r_body[kb, 0] + rot[2, 1] * st.r_body[kb, 1] + rot[2, 2] * st.r_body[kb, 2]
         # vertical velocity of the lowest component's centre
         vy = st.vel[p, 1] + st.omega[p, 2] * rx - st.omega[p, 0] * rz
-        if vy < 0.0 and y_old >= 0.0:
+        # crossed: this component's bottom started the step on or above the bed top (another
+        # component may have been on it: a tumbling grain's second contact)
+        h0, _ = _bottom(st, kb, x0[0], x0[1], x0[6], x0[7], x0[8], x0[9], x0[4], x0[10], x0[12])
+        if vy < 0.0 and h0 >= 0.0:
             _bed_impact(f, coef, hc, st, w, p, t, dt, True, kb, bed, seed)
         else:
             # grazing contact without a descending crossing: keep the grain on the bed
@@ -1070,8 +1110,7 @@ def step_grain(f, coef, bed, seed, st, w, hc, p, t, dt):
                 _bed_impact(f, coef, hc, st, w, p, t, dt, False, kb, bed, seed)
             y_new = 0.0
     else:
-        if y_new > st.jump_ymax[p]:
-            st.jump_ymax[p] = y_new
+        st.jump_ymax[p] = max(st.jump_ymax[p], y_new, highest_on_path(st, w, p, dt))
 
 
 # A parallel pass over the grains runs over chunks of CHUNK grains; each chunk reads the
