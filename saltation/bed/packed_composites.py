@@ -33,8 +33,9 @@ After a grain's move in a step (free flight, then grain–grain contacts) from i
 Jumps as on the packed bed for spheres: only an impact after at least one step without
 bed contact ends a jump; a resting or rolling grain moves its next jump's start along.
 The jump height is the highest elevation of the grain's lowest point above the bed top
-(y = 0), as on the virtual bed. Every impulse restarts the Basset history of all
-components (physics/history.py). Known gap: a contact that begins and ends within one step
+(y = 0), as on the virtual bed, sampled inside the steps too
+(flight.composites.highest_on_path). Every impulse gives each component's Basset history
+a slip step dated at the impact (physics/history.py). Known gap: a contact that begins and ends within one step
 without the end position overlapping a bed sphere is not seen (grains move ≲ 0.2 Dn
 per step at the runs' time steps, so only grazing contacts can pass).
 """
