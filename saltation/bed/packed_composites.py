@@ -56,9 +56,9 @@ from ..flight.composites import (
     _impulse,
     _lowest,
     _quat_to_matrix,
-    _rotate_quat,
     _rotated,
     _set_state,
+    _turned,
     _world_inverse_inertia,
     chunk_range,
     flight_remainder,
@@ -192,12 +192,9 @@ def packed_bed_check_cluster(f, coef, hc, st, w, p, t, dt, step, bed, pb, last_c
             st.pos[p, i], st.vel[p, i] = hermite_point(x0[i], x[i], x0[3 + i], x[3 + i], s, h)
             st.omega[p, i] = (1.0 - s) * x0[10 + i] + s * x[10 + i]
         back = (1.0 - s) * h
-        q0, q1, q2, q3 = x[6], x[7], x[8], x[9]
-        _rotate_quat(x, x[10:13], -back)
-        nq = math.sqrt(x[6] * x[6] + x[7] * x[7] + x[8] * x[8] + x[9] * x[9])
-        for i in range(4):
-            st.quat[p, i] = x[6 + i] / nq
-        x[6], x[7], x[8], x[9] = q0, q1, q2, q3
+        q0, q1, q2, q3 = _turned(x[6], x[7], x[8], x[9], x[10], x[11], x[12], -back)
+        nq = math.sqrt(q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3)
+        st.quat[p, 0], st.quat[p, 1], st.quat[p, 2], st.quat[p, 3] = q0 / nq, q1 / nq, q2 / nq, q3 / nq
         _quat_to_matrix(st.quat[p, 0], st.quat[p, 1], st.quat[p, 2], st.quat[p, 3], w.rot[p])
         rx, ry, rz = _component_world(st, w, p, k)
         reach = BED_RADIUS + 0.5 * st.d_comp[k]
