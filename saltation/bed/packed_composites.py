@@ -56,11 +56,11 @@ from ..flight.composites import (
     _impulse,
     _lowest,
     _quat_to_matrix,
-    _rotated,
     _set_state,
     _turned,
     _world_inverse_inertia,
     chunk_range,
+    component_at,
     flight_remainder,
     highest_on_path,
     state_row,
@@ -90,14 +90,6 @@ def _component_world(st, w, p, k):
 
 
 @njit(cache=True, no_cfunc_wrapper=True, _nrt=False, error_model="numpy")
-def _component_at(st, p, k, x):
-    """Centre and velocity of component k for the grain state in the row x (x, v, q, Ω)."""
-    rx, ry, rz = _rotated(x[6], x[7], x[8], x[9], st.r_body[k, 0], st.r_body[k, 1], st.r_body[k, 2])
-    return ((x[0] + rx, x[1] + ry, x[2] + rz),
-            (x[3] + x[11] * rz - x[12] * ry, x[4] + x[12] * rx - x[10] * rz, x[5] + x[10] * ry - x[11] * rx))
-
-
-@njit(cache=True, no_cfunc_wrapper=True, _nrt=False, error_model="numpy")
 def _first_entry(st, w, p, pb, h):
     """(component, bed sphere, s, the sphere centre's image) of the contact that grain p's
     segment (from the row ``w.x0[p]`` to the row ``w.x[p]``, over h) entered first;
@@ -108,10 +100,10 @@ def _first_entry(st, w, p, pb, h):
     c0 = c1 = c2 = 0.0
     for k in range(st.cstart[p], st.cstart[p + 1]):
         reach = BED_RADIUS + 0.5 * st.d_comp[k]
-        x1, u1 = _component_at(st, p, k, w.x[p])
+        x1, u1 = component_at(st, k, w.x[p])
         if x1[1] - BED_CENTRE_Y >= reach:
             continue
-        x0, u0 = _component_at(st, p, k, w.x0[p])
+        x0, u0 = component_at(st, k, w.x0[p])
         j, s, b0, b1, b2 = path_entry(pb, x0, x1, u0, u1, h, reach)
         if j >= 0 and s < best_s:
             best_s = s

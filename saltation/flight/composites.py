@@ -325,14 +325,18 @@ def world_centres(st: ClusterState, p: int) -> np.ndarray:
 
 
 # --------------------------------------------------------------------- small kernels
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False, inline="always")
+def _second_row(w, x, y, z):
+    """The second (vertical) row of the rotation matrix of the unit quaternion (w, x, y, z)."""
+    return 2.0 * (x * y + w * z), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z - w * x)
+
+
 @njit(cache=True, no_cfunc_wrapper=True, _nrt=False)
 def _quat_to_matrix(w, x, y, z, m):
     m[0, 0] = 1.0 - 2.0 * (y * y + z * z)
     m[0, 1] = 2.0 * (x * y - w * z)
     m[0, 2] = 2.0 * (x * z + w * y)
-    m[1, 0] = 2.0 * (x * y + w * z)
-    m[1, 1] = 1.0 - 2.0 * (x * x + z * z)
-    m[1, 2] = 2.0 * (y * z - w * x)
+    m[1, 0], m[1, 1], m[1, 2] = _second_row(w, x, y, z)
     m[2, 0] = 2.0 * (x * z - w * y)
     m[2, 1] = 2.0 * (y * z + w * x)
     m[2, 2] = 1.0 - 2.0 * (x * x + y * y)
@@ -724,9 +728,8 @@ def highest_on_path(st, w, p, dt):
         s = j / JUMP_HEIGHT_SAMPLES
         py = hermite_point(x0[1], st.pos[p, 1], x0[4], st.vel[p, 1], s, dt)[0]
         q0, q1, q2, q3 = _turned(q[0], q[1], q[2], q[3], o[0], o[1], o[2], -(1.0 - s) * dt)
-        # the rotation matrix's second row (_quat_to_matrix)
-        low, _ = _lowest_of_row(st, p, py, 2.0 * (q1 * q2 + q0 * q3), 1.0 - 2.0 * (q1 * q1 + q3 * q3),
-                                2.0 * (q2 * q3 - q0 * q1))
+        m10, m11, m12 = _second_row(q0, q1, q2, q3)
+        low, _ = _lowest_of_row(st, p, py, m10, m11, m12)
         best = max(best, low)
     return best
 
@@ -903,11 +906,19 @@ def _rotated(q0, q1, q2, q3, r0, r1, r2):
 
 
 @njit(cache=True, no_cfunc_wrapper=True, _nrt=False, error_model="numpy")
-def _bottom(st, k, px, py, q0, q1, q2, q3, vy, o0, o2):
+def component_at(st, k, x):
+    """Centre and velocity (world) of component k for the grain state in the row x (x, v, q, Ω)."""
+    rx, ry, rz = _rotated(x[6], x[7], x[8], x[9], st.r_body[k, 0], st.r_body[k, 1], st.r_body[k, 2])
+    return ((x[0] + rx, x[1] + ry, x[2] + rz),
+            (x[3] + x[11] * rz - x[12] * ry, x[4] + x[12] * rx - x[10] * rz, x[5] + x[10] * ry - x[11] * rx))
+
+
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False, error_model="numpy")
+def _bottom(st, k, x):
     """Height of component k's bottom above the bed top, and its vertical speed, for the
-    grain's centre height py, orientation q and velocity (vy, Ω)."""
-    rx, ry, rz = _rotated(q0, q1, q2, q3, st.r_body[k, 0], st.r_body[k, 1], st.r_body[k, 2])
-    return py + ry - 0.5 * st.d_comp[k], vy + o2 * rx - o0 * rz
+    grain state in the row x."""
+    c, u = component_at(st, k, x)
+    return c[1] - 0.5 * st.d_comp[k], u[1]
 
 
 @njit(cache=True, no_cfunc_wrapper=True, _nrt=False, error_model="numpy")
@@ -925,9 +936,8 @@ def _bed_impact(f, coef, hc, st, w, p, t, dt, crossed, kb, bed, seed):
     s = 1.0
     if crossed:
         x0 = w.x0[p]
-        h0, v0 = _bottom(st, kb, x0[0], x0[1], x0[6], x0[7], x0[8], x0[9], x0[4], x0[10], x0[12])
-        h1, v1 = _bottom(st, kb, st.pos[p, 0], st.pos[p, 1], st.quat[p, 0], st.quat[p, 1], st.quat[p, 2],
-                         st.quat[p, 3], st.vel[p, 1], st.omega[p, 0], st.omega[p, 2])
+        h0, v0 = _bottom(st, kb, x0)
+        h1, v1 = _bottom(st, kb, x)  # x: the end state
         s = first_below(h0, h1, v0, v1, dt, 0.0)
         for i in range(3):
             x[i], x[3 + i] = hermite_point(x0[i], st.pos[p, i], x0[3 + i], st.vel[p, i], s, dt)
@@ -1099,7 +1109,7 @@ def step_grain(f, coef, bed, seed, st, w, hc, p, t, dt):
         vy = st.vel[p, 1] + st.omega[p, 2] * rx - st.omega[p, 0] * rz
         # crossed: this component's bottom started the step on or above the bed top (another
         # component may have been on it: a tumbling grain's second contact)
-        h0, _ = _bottom(st, kb, x0[0], x0[1], x0[6], x0[7], x0[8], x0[9], x0[4], x0[10], x0[12])
+        h0, _ = _bottom(st, kb, x0)
         if vy < 0.0 and h0 >= 0.0:
             _bed_impact(f, coef, hc, st, w, p, t, dt, True, kb, bed, seed)
         else:
