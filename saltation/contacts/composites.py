@@ -637,7 +637,7 @@ def _poses(sr, wr, cr, s, dt):
             _pose_one(sv, wv, cv, cv.act[q], s, dt)
 
 
-@njit(cache=True, no_cfunc_wrapper=True)
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False)
 def _pose_one(st, w, cc, p, s, dt):
     x0 = w.x0[p]
     x1 = cc.x1[p]
@@ -717,7 +717,7 @@ def component_forces(sr, cr, h, sig):
             _grain_force(sv, cv, cv.act[q], h, sig)
 
 
-@njit(cache=True, no_cfunc_wrapper=True)
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False)
 def _grain_force(st, cc, p, h, sig):
     # σ a run-time float (not a literal flag): one compiled copy serves set-up and sub-steps
     update = sig > 0.0
@@ -849,7 +849,7 @@ def _bed_impact(st, cc, p, t_hit):
     st.jump_x0[p] = cc.P[p, 0]
 
 
-@njit(cache=True, no_cfunc_wrapper=True)
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False)
 def _kick_one(st, cc, p, k):
     """δv += k F/m, δL += k T, and δΩ += k I_w⁻¹ T (Ω = I_w⁻¹(L_f + δL) is linear in δL:
     the drift that follows must turn the grain with the kicked spin, as it moves it
@@ -865,7 +865,7 @@ def _kick_one(st, cc, p, k):
     cc.dL[p, 2] += t2
 
 
-@njit(cache=True, no_cfunc_wrapper=True)
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False)
 def _move_one(st, w, cc, p, h, half_skin, sig, dt):
     _kick_one(st, cc, p, 0.5 * h)
     over = _drift_one(st, cc, p, h, half_skin)
@@ -873,24 +873,43 @@ def _move_one(st, w, cc, p, h, half_skin, sig, dt):
     return over
 
 
+# The sub-step passes: a range of active grains in one call of a kernel compiled without
+# reference counting (_nrt=False, as flight/composites.py's hot loops): called once per
+# grain from a reference-counted loop, the per-grain kernels cost an atomic increment and
+# decrement of every array of the three tuples per call, ~80 % of the phase.
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False)
+def _move_grains(st, w, cc, lo, hi, h, half_skin, sig, dt):
+    """Half kick, drift and pose at σ of active grains lo..hi-1; returns how many overran."""
+    over = 0
+    for q in range(lo, hi):
+        over += _move_one(st, w, cc, cc.act[q], h, half_skin, sig, dt)
+    return over
+
+
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False)
+def _force_kick_grains(st, cc, lo, hi, h, sig):
+    """Contact forces at σ and the second half kick of active grains lo..hi-1."""
+    for q in range(lo, hi):
+        p = cc.act[q]
+        _grain_force(st, cc, p, h, sig)
+        _kick_one(st, cc, p, 0.5 * h)
+
+
 @njit(cache=True, no_cfunc_wrapper=True, parallel=True)
 def _move_par(sr, wr, cr, h, half_skin, sig, dt):
     n = cr.n_act[0]
-    over = np.zeros(n, np.int64)
-    for c in prange((n + CHUNK - 1) // CHUNK):
+    chunks = (n + CHUNK - 1) // CHUNK
+    over = np.zeros(chunks, np.int64)
+    for c in prange(chunks):
         sv, wv, cv = _views(sr, wr, cr)
-        for q in range(*chunk_range(c, n)):
-            over[q] = _move_one(sv, wv, cv, cv.act[q], h, half_skin, sig, dt)
+        over[c] = _move_grains(sv, wv, cv, *chunk_range(c, n), h, half_skin, sig, dt)
     return over.sum()
 
 
 @njit(cache=True, no_cfunc_wrapper=True)
 def _move_ser(sr, wr, cr, h, half_skin, sig, dt):
     st, w, cc = _views(sr, wr, cr)
-    over = 0
-    for q in range(cc.n_act[0]):
-        over += _move_one(st, w, cc, cc.act[q], h, half_skin, sig, dt)
-    return over
+    return _move_grains(st, w, cc, 0, cc.n_act[0], h, half_skin, sig, dt)
 
 
 @njit(cache=True, no_cfunc_wrapper=True, parallel=True)
@@ -898,22 +917,16 @@ def _force_kick_par(sr, cr, h, sig):
     n = cr.n_act[0]
     for c in prange((n + CHUNK - 1) // CHUNK):
         sv, cv = as_tuple(sr, ClusterState), as_tuple(cr, ClusterContacts)
-        for q in range(*chunk_range(c, n)):
-            p = cv.act[q]
-            _grain_force(sv, cv, p, h, sig)
-            _kick_one(sv, cv, p, 0.5 * h)
+        _force_kick_grains(sv, cv, *chunk_range(c, n), h, sig)
 
 
 @njit(cache=True, no_cfunc_wrapper=True)
 def _force_kick_ser(sr, cr, h, sig):
     st, cc = as_tuple(sr, ClusterState), as_tuple(cr, ClusterContacts)
-    for q in range(cc.n_act[0]):
-        p = cc.act[q]
-        _grain_force(st, cc, p, h, sig)
-        _kick_one(st, cc, p, 0.5 * h)
+    _force_kick_grains(st, cc, 0, cc.n_act[0], h, sig)
 
 
-@njit(cache=True, no_cfunc_wrapper=True)
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False)
 def _drift_one(st, cc, p, h, half_skin):
     cc.iw[p]
     rot = cc.rot[p]
@@ -951,7 +964,7 @@ def _finish(sr, wr, cr):
             _finish_one(sv, wv, cv, cv.act[q])
 
 
-@njit(cache=True, no_cfunc_wrapper=True)
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False)
 def _finish_one(st, w, cc, p):
     if cc.touched[p] != 0:
         x1 = cc.x1[p]
