@@ -80,7 +80,7 @@ COMPOSITES = WATCH + textwrap.dedent("""
                   **{"particle.shape": "mixture", "run.n_particles": 40, "run.duration": 0.05, "output.vtk": False})
     kernels = [flight.free_flight_pass, composites.advance_clusters_contacts, composites._reach,
                composites._build_list, composites._poses, composites._engage, composites.component_forces,
-               composites._move_par, composites._move_ser, composites._force_kick_par, composites._force_kick_ser,
+               composites._move_par, composites._substeps_ser, composites._force_kick_par, composites._force_kick_ser,
                composites._finish]
     kernels = {k.py_func.__name__: count(k) for k in kernels}
     print(json.dumps({"helpers": started, "kernels": kernels}))
@@ -90,7 +90,7 @@ COMPOSITES = WATCH + textwrap.dedent("""
 def test_composites_split_their_contact_phase_between_the_two_processes(tmp_path):
     res, _ = _run(tmp_path, "run", tmp_path / "cache", COMPOSITES)  # empty cache: a first run
     (helper,) = res["helpers"]  # one helper, given the sub-step kernels
-    assert helper == ["_poses", "_engage", "component_forces", "_move_par", "_move_ser", "_force_kick_par",
+    assert helper == ["_poses", "_engage", "component_forces", "_move_par", "_substeps_ser", "_force_kick_par",
                       "_force_kick_ser", "_finish"], res
     for name, (hits, misses, sigs) in res["kernels"].items():
         if name in helper:  # compiled by the helper, loaded here by the step: never compiled here

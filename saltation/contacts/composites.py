@@ -633,11 +633,17 @@ def _poses(sr, wr, cr, s, dt):
     n = cr.n_act[0]
     for c in prange((n + CHUNK - 1) // CHUNK):
         sv, wv, cv = _views(sr, wr, cr)
-        for q in range(*chunk_range(c, n)):
-            _pose_one(sv, wv, cv, cv.act[q], s, dt)
+        _pose_grains(sv, wv, cv, *chunk_range(c, n), s, dt)
 
 
 @njit(cache=True, no_cfunc_wrapper=True, _nrt=False)
+def _pose_grains(st, w, cc, lo, hi, s, dt):
+    """_pose_one of active grains lo..hi-1 (one compiled copy of it; "The sub-step passes")."""
+    for q in range(lo, hi):
+        _pose_one(st, w, cc, cc.act[q], s, dt)
+
+
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False, inline="always")
 def _pose_one(st, w, cc, p, s, dt):
     x0 = w.x0[p]
     x1 = cc.x1[p]
@@ -663,7 +669,7 @@ def _pose_one(st, w, cc, p, s, dt):
         nf = math.sqrt(f0 * f0 + f1 * f1 + f2 * f2 + f3 * f3)
         f0, f1, f2, f3 = f0 / nf, f1 / nf, f2 / nf, f3 / nf
     else:
-        th = math.acos(dot)
+        th = 0.5 * cc.phi[p]  # = acos(dot): _reach_one (the same bits)
         sa = math.sin((1.0 - s) * th) / math.sin(th)
         sb = math.sin(s * th) / math.sin(th)
         f0 = sa * a0 + sb * b0
@@ -713,11 +719,10 @@ def component_forces(sr, cr, h, sig):
     n = cr.n_act[0]
     for c in prange((n + CHUNK - 1) // CHUNK):
         sv, cv = as_tuple(sr, ClusterState), as_tuple(cr, ClusterContacts)
-        for q in range(*chunk_range(c, n)):
-            _grain_force(sv, cv, cv.act[q], h, sig)
+        _force_kick_grains(sv, cv, *chunk_range(c, n), h, sig, False)
 
 
-@njit(cache=True, no_cfunc_wrapper=True, _nrt=False)
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False, inline="always")
 def _grain_force(st, cc, p, h, sig):
     # σ a run-time float (not a literal flag): one compiled copy serves set-up and sub-steps
     update = sig > 0.0
@@ -849,7 +854,7 @@ def _bed_impact(st, cc, p, t_hit):
     st.jump_x0[p] = cc.P[p, 0]
 
 
-@njit(cache=True, no_cfunc_wrapper=True, _nrt=False)
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False, inline="always")
 def _kick_one(st, cc, p, k):
     """δv += k F/m, δL += k T, and δΩ += k I_w⁻¹ T (Ω = I_w⁻¹(L_f + δL) is linear in δL:
     the drift that follows must turn the grain with the kicked spin, as it moves it
@@ -865,68 +870,88 @@ def _kick_one(st, cc, p, k):
     cc.dL[p, 2] += t2
 
 
-@njit(cache=True, no_cfunc_wrapper=True, _nrt=False)
-def _move_one(st, w, cc, p, h, half_skin, sig, dt):
-    _kick_one(st, cc, p, 0.5 * h)
-    over = _drift_one(st, cc, p, h, half_skin)
-    _pose_one(st, w, cc, p, sig, dt)
-    return over
-
-
-# The sub-step passes: a range of active grains in one call of a kernel compiled without
-# reference counting (_nrt=False, as flight/composites.py's hot loops): called once per
-# grain from a reference-counted loop, the per-grain kernels cost an atomic increment and
-# decrement of every array of the three tuples per call, ~80 % of the phase.
+# The sub-step passes: a range of active grains per
+# call of a kernel compiled without reference counting (_nrt=False), the per-grain kernels
+# inlined into it. A per-grain kernel called once per grain and sub-step costs, per call,
+# the passing of the three tuples (~60 arrays, some 500 words pushed on the stack) and,
+# from a reference-counted caller, an atomic increment and decrement of every array.
 @njit(cache=True, no_cfunc_wrapper=True, _nrt=False)
 def _move_grains(st, w, cc, lo, hi, h, half_skin, sig, dt):
-    """Half kick, drift and pose at σ of active grains lo..hi-1; returns how many overran."""
+    """Half kick and drift of active grains lo..hi-1, then their poses at σ (a grain's pose
+    reads only its own state); returns how many overran."""
     over = 0
     for q in range(lo, hi):
-        over += _move_one(st, w, cc, cc.act[q], h, half_skin, sig, dt)
+        p = cc.act[q]
+        _kick_one(st, cc, p, 0.5 * h)
+        over += _drift_one(st, cc, p, h, half_skin)
+    _pose_grains(st, w, cc, lo, hi, sig, dt)
     return over
 
 
 @njit(cache=True, no_cfunc_wrapper=True, _nrt=False)
-def _force_kick_grains(st, cc, lo, hi, h, sig):
-    """Contact forces at σ and the second half kick of active grains lo..hi-1."""
+def _force_kick_grains(st, cc, lo, hi, h, sig, kick):
+    """Contact forces at σ of active grains lo..hi-1 and, with ``kick``, their second half
+    kick (a kick changes only the grain's own deviation, which no force reads)."""
     for q in range(lo, hi):
         p = cc.act[q]
         _grain_force(st, cc, p, h, sig)
-        _kick_one(st, cc, p, 0.5 * h)
+        if kick:
+            _kick_one(st, cc, p, 0.5 * h)
 
 
-@njit(cache=True, no_cfunc_wrapper=True, parallel=True)
-def _move_par(sr, wr, cr, h, half_skin, sig, dt):
-    n = cr.n_act[0]
-    chunks = (n + CHUNK - 1) // CHUNK
-    over = np.zeros(chunks, np.int64)
-    for c in prange(chunks):
-        sv, wv, cv = _views(sr, wr, cr)
-        over[c] = _move_grains(sv, wv, cv, *chunk_range(c, n), h, half_skin, sig, dt)
-    return over.sum()
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False)
+def _substep_range(st, w, cc, s0, n_sub, h, half_skin, dt):
+    """Sub-steps s0, s0 + 1, … of the contact phase on one thread, up to the last or to the
+    first whose drift overran the list's skin (its forces not yet done: the caller
+    rebuilds the list first); returns (that sub-step or n_sub, grains that overran)."""
+    na = cc.n_act[0]
+    for s in range(s0, n_sub):
+        sig = (s + 1) / n_sub
+        over = _move_grains(st, w, cc, 0, na, h, half_skin, sig, dt)
+        if over > 0:
+            return s, over
+        _force_kick_grains(st, cc, 0, na, h, sig, True)
+    return n_sub, 0
 
 
 @njit(cache=True, no_cfunc_wrapper=True)
-def _move_ser(sr, wr, cr, h, half_skin, sig, dt):
+def _substeps_ser(sr, wr, cr, s0, n_sub, h, half_skin, dt):
     st, w, cc = _views(sr, wr, cr)
-    return _move_grains(st, w, cc, 0, cc.n_act[0], h, half_skin, sig, dt)
+    return _substep_range(st, w, cc, s0, n_sub, h, half_skin, dt)
+
+
+@njit(cache=True, no_cfunc_wrapper=True, inline="always")
+def _piece(c, k, n):
+    """Active grains lo..hi-1 of piece c of k (one piece per thread: a grain's result does
+    not depend on how the grains are cut)."""
+    return np.int64(c) * n // k, (np.int64(c) + 1) * n // k
 
 
 @njit(cache=True, no_cfunc_wrapper=True, parallel=True)
-def _force_kick_par(sr, cr, h, sig):
+def _move_par(sr, wr, cr, h, half_skin, sig, dt, k):
     n = cr.n_act[0]
-    for c in prange((n + CHUNK - 1) // CHUNK):
+    over = np.zeros(k, np.int64)
+    for c in prange(k):
+        sv, wv, cv = _views(sr, wr, cr)
+        over[c] = _move_grains(sv, wv, cv, *_piece(c, k, n), h, half_skin, sig, dt)
+    return over.sum()
+
+
+@njit(cache=True, no_cfunc_wrapper=True, parallel=True)
+def _force_kick_par(sr, cr, h, sig, k):
+    n = cr.n_act[0]
+    for c in prange(k):
         sv, cv = as_tuple(sr, ClusterState), as_tuple(cr, ClusterContacts)
-        _force_kick_grains(sv, cv, *chunk_range(c, n), h, sig)
+        _force_kick_grains(sv, cv, *_piece(c, k, n), h, sig, True)
 
 
 @njit(cache=True, no_cfunc_wrapper=True)
 def _force_kick_ser(sr, cr, h, sig):
     st, cc = as_tuple(sr, ClusterState), as_tuple(cr, ClusterContacts)
-    _force_kick_grains(st, cc, 0, cc.n_act[0], h, sig)
+    _force_kick_grains(st, cc, 0, cc.n_act[0], h, sig, True)
 
 
-@njit(cache=True, no_cfunc_wrapper=True, _nrt=False)
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False, inline="always")
 def _drift_one(st, cc, p, h, half_skin):
     cc.iw[p]
     rot = cc.rot[p]
@@ -1034,7 +1059,7 @@ def build_contact_list(sr, wr, cr, dt, pb):
 
 
 @njit(cache=True, no_cfunc_wrapper=True, inline="always")  # inlined: one level less for the step to re-link (compile time)
-def contact_phase(sr, wr, cr, dt, n_sub, pb):
+def contact_phase(sr, wr, cr, dt, n_sub, pb, threads=1):
     """Grain–grain contacts (and, with a packed bed ``pb``, soft bed contacts; None: none)
     of one hydrodynamic step of length dt, after the free flight of every grain (module
     docstring; cr.step_t and cr.step_index name the step). The state, work and contact
@@ -1047,18 +1072,26 @@ def contact_phase(sr, wr, cr, dt, n_sub, pb):
     h = dt / n_sub
     half_skin = 0.5 * cr.par[4]
     component_forces(sr, cr, h, 0.0)
-    par = na >= PARALLEL_FROM
-    for s in range(n_sub):
+    par = na >= PARALLEL_FROM and threads > 1
+    s = np.int64(0)  # not a literal: _substeps_ser compiles for one type of s
+    while s < n_sub:
+        # half kick, drift, pose at σ; contact forces and the second half kick. On one
+        # thread the sub-steps run in one call until one overruns the list's skin
+        if par:
+            over = _move_par(sr, wr, cr, h, half_skin, (s + 1) / n_sub, dt, threads)
+        else:
+            s, over = _substeps_ser(sr, wr, cr, s, n_sub, h, half_skin, dt)
+            if s == n_sub:
+                break
         sig = (s + 1) / n_sub
-        # half kick, drift, pose at σ (one pass); contact forces and the second half kick
-        over = _move_par(sr, wr, cr, h, half_skin, sig, dt) if par else _move_ser(sr, wr, cr, h, half_skin, sig, dt)
         if over > 0:
             cr.counters[OVERRUNS] += over
             _build_list(sr, cr, pb)
         if par:
-            _force_kick_par(sr, cr, h, sig)
+            _force_kick_par(sr, cr, h, sig, threads)
         else:
             _force_kick_ser(sr, cr, h, sig)
+        s += 1
     cr.counters[SUBSTEPPED] += na * n_sub
     _finish(sr, wr, cr)
 
@@ -1074,10 +1107,11 @@ def compile_jobs(st, w, cc, dt, n_sub, pb):
     ``_build_list``) may be compiled by both processes (~0.5 s each)."""
     h = dt / n_sub
     sr, wr, cr = as_refs(st, w, cc)
-    step = (sr, wr, cr, h, 0.5 * cc.par[4], 1.0, dt)
+    step = (sr, wr, cr, h, 0.5 * cc.par[4], 1.0, dt, 2)
     setup = [(_reach, (sr, wr, cr, dt)), (_build_list, (sr, cr, pb))]
     substeps = [(_poses, (sr, wr, cr, 0.0, dt)), (_engage, (sr, wr, cr)), (component_forces, (sr, cr, h, 0.0)),
-                (_move_par, step), (_move_ser, step), (_force_kick_par, (sr, cr, h, 1.0)),
+                (_move_par, step), (_substeps_ser, (sr, wr, cr, 0, n_sub, h, 0.5 * cc.par[4], dt)),
+                (_force_kick_par, (sr, cr, h, 1.0, 2)),
                 (_force_kick_ser, (sr, cr, h, 1.0)), (_finish, (sr, wr, cr))]
     return setup, substeps
 
@@ -1090,11 +1124,14 @@ def contacts_of(cr):
 
 # ----------------------------------------------------------------------------- run loop
 @njit(cache=True, no_cfunc_wrapper=True)
-def advance_clusters_contacts(f, coef, bed, seed, st, w, hc, t0, dt, n_steps, top, cc, n_sub, timers, pb):
+def advance_clusters_contacts(f, coef, bed, seed, st, w, hc, t0, dt, n_steps, top, cc, n_sub, timers, pb, threads=1):
     """flight.composites.advance_clusters with grain–grain contacts: free flight (RK4 + bed) of
     every grain, then ``contact_phase`` (pb: the packed bed or None), each step;
     timers += (free flight s, contacts s). Stops early when a grain is not finite or a
-    jump buffer is full. Returns (steps done, the ClusterContacts to keep)."""
+    jump buffer is full. Returns (steps done, the ClusterContacts to keep). ``threads``:
+    Numba's thread count; on one the sub-steps run in one call until one overruns the
+    list's skin, on more the passes of a sub-step are cut into one piece per thread (the
+    same bits either way)."""
     n = st.pos.shape[0]
     cap = st.jump_buf.shape[1]
     k0 = round(t0 / dt)  # the global index of the first step (t0 is always k0 * dt)
@@ -1113,7 +1150,7 @@ def advance_clusters_contacts(f, coef, bed, seed, st, w, hc, t0, dt, n_steps, to
             cr.step_t[0] = t
             cr.step_t[1] = dt
             cr.step_index[0] = k0 + s
-            contact_phase(sr, wr, cr, dt, n_sub, pb)
+            contact_phase(sr, wr, cr, dt, n_sub, pb, threads)
         c2 = wall_clock()
         timers[0] += c1 - c0
         timers[1] += c2 - c1

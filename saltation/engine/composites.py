@@ -61,6 +61,7 @@ import math
 import time
 from pathlib import Path
 
+import numba
 import numpy as np
 import pandas as pd
 
@@ -223,7 +224,7 @@ class ClusterSimulation(Simulation):
     def _contact_step_args(self, f, st, w, seed, t0, n):
         """contacts.composites.advance_clusters_contacts's arguments."""
         return (f, self.coef, self.bed, seed, st, w, self.hist_coef, t0, self.dt, n, self.top_d, self.cc, self.n_sub,
-                self.timers, self.pb)
+                self.timers, self.pb, numba.get_num_threads())
 
     def _centres_resting(self, quat):
         """Start positions for run.start = "rest": each grain, turned by its orientation,
