@@ -227,6 +227,40 @@ def test_dense_mixture_run_on_the_les_keeps_overlaps_small(tmp_path):
     assert (res.tracks["y"] > 0).all()
 
 
+def test_mixture_contacts_same_bits_on_any_margin_and_thread_count(tmp_path):
+    """The natural mixture at 2 % with soft contacts on the virtual bed: the default margin
+    (contacts.composites.default_skin: 2 impact_speed dt, 0.4 Dn here) engages fewer grains
+    than a wide one but gives the same jumps and end state; on two threads (the sub-step
+    passes cut into one range per thread) the same bits as on one."""
+    import pandas as pd
+
+    from saltation.engine.simulation import run
+
+    def go(name, threads, **collisions):
+        case = {"particle": {"diameter": 0.69e-3, "shape": "mixture"},
+                "flow": {"source": "les", "tau_ratio": 1.79},
+                "collisions": {"model": "soft", **collisions},
+                "run": {"concentration": 0.0207, "domain": [0.024, 0.012, 0.02], "duration": 0.1,
+                        "seed": 1, "threads": threads},
+                "output": {"vtk": False}}
+        res = run(case, out=tmp_path / name, progress=False)
+        return res.summary, pd.read_parquet(tmp_path / name / "particles.parquet"), res.jumps
+
+    s1, p1, j1 = go("default", 1)
+    assert s1["collisions"]["soft"]["skin_d"] == pytest.approx(ccm.default_skin(0.02, 10.0)) == pytest.approx(0.4)
+    assert s1["collisions"]["particle_particle"] >= 100
+    s2, p2, j2 = go("wide", 1, skin=0.96)
+    eng1 = s1["collisions"]["contact_phase"]["engaged_grain_steps"]
+    eng2 = s2["collisions"]["contact_phase"]["engaged_grain_steps"]
+    assert eng1 < 0.8 * eng2
+    s3, p3, j3 = go("two", 2)
+    assert s3["collisions"]["contact_phase"]["engaged_grain_steps"] == eng1
+    for p, j, s in ((p2, j2, s2), (p3, j3, s3)):
+        pd.testing.assert_frame_equal(p, p1)
+        pd.testing.assert_frame_equal(j, j1)
+        assert s["collisions"]["particle_particle"] == s1["collisions"]["particle_particle"]
+
+
 def test_elastic_frictionless_collision_of_asymmetric_grains_conserves_energy():
     """e = 1, f = 0: the contact is a pure spring; the energy after an off-centre
     collision of a rod and a blade (which sets them spinning) equals the energy before

@@ -516,7 +516,8 @@ class CollisionsConfig(_Table):
     skin: float | None = _key(kind="float", unit="d", gt=0.0, le=5.0,
                               doc="Verlet neighbour skin in d (soft contacts); absent: twice "
                                   "the distance a grain at 20 u* covers in one step, x1.2, "
-                                  ">= 0.1 d (stepping.default_skin)")
+                                  ">= 0.1 d (stepping.default_skin); bonded-sphere grains: "
+                                  "2 impact_speed dt, >= 0.1 d (contacts.composites.default_skin)")
 
     def _check(self):
         if self.model == "soft" and self.restitution == 0.0:

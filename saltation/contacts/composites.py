@@ -82,6 +82,26 @@ off-centre collision of a spinning rod and blade: kinetic energy after/before �
 (it is 0 to round-off for grains that do not spin; angular and linear momentum are
 conserved to round-off whatever the spin).
 
+Cost
+----
+The sub-step passes go over the active grains in ranges: one call of a kernel compiled
+without reference counting (``_nrt=False``) per range, the per-grain kernels (pose, kick
+and drift, forces) inlined into it (_move_grains, _force_kick_grains); on one thread the
+whole sub-step loop is one call (_substep_range) that returns only when a grain overruns
+the list's skin; on more, each pass is cut into one range per thread. Called once per
+grain and sub-step, a per-grain kernel was passed the three tuples (~60 arrays, some
+500 words pushed on the stack) and, from a reference-counted caller, an atomic increment
+and decrement of every array: 80–90 % of the phase. The natural mixture at 2.07 % in a
+0.024 × 0.012 m box (693 grains, 0.1 s, one thread): contact phase 89.95 s → 4.03 s, the
+same bits (benchmarks/bench_mixture_contacts.py compares it with spheres in the same
+box). The margin s of the engagement test and the list (``default_skin``) is the
+farthest a contact can deflect a grain within one step, 2 v_impact Δt (0.4 Dn at the
+defaults): the list is built afresh every step, so it need not cover a step's travel,
+as the sphere list must. Still, every engaged grain is sub-stepped through the whole step
+with n_sub set by the lightest point-effective mass (421 sub-steps per 0.02 step against
+128 for spheres): at 2.07 % the phase is ~20× the spheres' per grain-step; the sphere
+phase's joining late and retiring (contacts/phase.py) are not done here.
+
 The packed bed (bed.model = "packed", ``with_packed_bed``)
 ----------------------------------------------------------
 A grain that is sub-stepped has its bed contacts inside the sub-steps, as for spheres
@@ -145,11 +165,21 @@ from .cells import axis_index, axis_span, grid_shape, min_image, sort_points, st
 __all__ = ["ClusterContacts", "compile_jobs", "make_cluster_contacts", "with_packed_bed", "contact_parameters", "substeps", "contact_phase",
            "build_contact_list", "as_refs", "contacts_of",
            "advance_clusters_contacts", "component_forces", "brute_force_pairs", "listed_pairs",
-           "point_effective_masses", "DEFAULT_SKIN"]
+           "point_effective_masses", "DEFAULT_SKIN", "default_skin"]
 
 PARALLEL_FROM = 128  # active grains from which the sub-step passes run in parallel (launch cost)
 PARTNERS = 16  # grains one grain can touch at once (statistics; more are not counted as new)
-DEFAULT_SKIN = 0.3  # Dn: engagement margin and list skin when the case gives none
+DEFAULT_SKIN = 0.3  # Dn: engagement margin and list skin of contact_parameters' callers that give none
+
+
+def default_skin(dt: float, impact_speed: float) -> float:
+    """Engagement margin and list skin s (Dn) of a run whose case gives none: the farthest a
+    contact can deflect a grain within one step, |δx| ≤ Δv Δt with Δv ≤ (1 + e) v_n ≤ 2 v_n
+    and v_n ≤ ``impact_speed`` (u*; the overlap rule's speed, at the 99.9th percentile of
+    real contacts' approach speeds: docs/studies/stiffness_dt.md), at least 0.1 Dn. The list
+    is built afresh every step, so unlike the sphere list (engine/stepping.default_skin,
+    kept across steps) it need not cover a step's travel: that is in each grain's reach."""
+    return max(0.1, 2.0 * impact_speed * dt)
 # slots of ClusterContacts.counters (engine/composites.py reports them by these names)
 LIST_BUILDS = 0  # component neighbour-list builds
 OVERRUNS = 1  # grains that moved further than the list's skin allowed

@@ -80,7 +80,7 @@ from ..physics.forces import CM
 from . import cold_start
 from .simulation import Simulation, SimulationError
 from .statistics import DISCARDED_JUMPS, empty_rows, jump_statistics
-from .stepping import LIST_HEIGHT, default_skin  # the contact skin and cell height of sphere runs
+from .stepping import LIST_HEIGHT  # the cell height of sphere runs
 
 CLASS_IDS = {c: i for i, c in enumerate(shapes.CLASSES)}  # track column class_id
 MIN_START_BOTTOM = Y_RANGE[0] - 0.5  # d: lowest start of a sphere's bottom (grains/initial.py)
@@ -172,7 +172,7 @@ class ClusterSimulation(Simulation):
         c = self.case
         cc = c.collisions
         kn = contact_model_from_case(c).kn * (1.0 + c.submerged_specific_gravity) * math.pi / 6.0
-        self.skin = float(cc.skin) if cc.skin is not None else default_skin(self.dt)
+        self.skin = float(cc.skin) if cc.skin is not None else cluster_contacts.default_skin(self.dt, cc.impact_speed)
         height = min(max(self.top_d, LIST_HEIGHT[0]), LIST_HEIGHT[1])
         lx, lz = self.domain_d
         self.kn = kn
