@@ -340,7 +340,16 @@ class ClusterSimulation(Simulation):
         raise SimulationError(
             f"grain {p} ({self.classes[p]}) became non-finite during step {step_base + steps_done}: position "
             f"{st.pos[p].tolist()}, velocity {st.vel[p].tolist()}, angular velocity "
-            f"{st.omega[p].tolist()}; outputs up to here are kept in {self.out}")
+            f"{st.omega[p].tolist()}; outputs up to here are kept in {self.out}" + self._known_failure())
+
+    def _known_failure(self) -> str:
+        """What is known to make a run of this kind fail (contacts/composites.py, "Known gaps")."""
+        if not (self.contacts and not self.packed):
+            return ""
+        return ("; a known problem of bonded-sphere grains with soft contacts on the virtual bed: contacts "
+                "push grains below the bed top, which is not part of the contact sub-steps, and their "
+                "lift-out spins them up until the free flight's RK4 fails (spin x dt of a few radians). "
+                "bed.model = \"packed\" keeps the bed in the sub-steps; a smaller run.dt_particle delays it")
 
     # ------------------------------------------------------------------ outputs
     def _write_particles(self, st):
