@@ -128,15 +128,16 @@ them into their neighbours (component overlaps jump to 0.05–0.16 Dn in one ste
 the ≤ 1 % the stiffness is set for) and spins them up to 150–220 u*/Dn, where the free
 flight's RK4 (spin × Δt of 3–4 rad) diverges: non-finite after 0.09 s at 1.03 % and
 0.33 s at 2.07 %. At 1.03 % it did so before the sub-step passes were restructured
-(bb70cfd: the same step, the same grain). At Δt = 0.01 and 0.005 the 2.07 % run lasted 1.5 s, with
-largest overlaps of 0.19 and 0.046 Dn and jump statistics that differ by ~24 % (H, L)
-between the two: not converged. A soft floor in the sub-steps for the engaged grains (a
+(bb70cfd: the same step, the same grain). At Δt = 0.01 and 0.005 the 2.07 % run lasted
+1.5 s, with largest overlaps of 0.19 and 0.046 Dn and jump statistics that differ by
+~24 % (H, L) between the two: not converged. A soft floor in the sub-steps for the engaged grains (a
 normal spring–dashpot at the bed top, as the packed bed's spheres) was tried: with it
 the 2.07 % run at 0.02 got through the 0.35 s tried but still had overlaps of 0.13 Dn;
 not kept. The packed bed, whose spheres are in the sub-steps, ran 1 s at 2.07 %.
 Also: a grain deflected by more than the engagement margin s towards a grain that was
-not active is not stopped (``overruns`` counts the steps where that was possible; ``missed_contacts`` — brute-force check at the
-end of such a step — the pairs in contact that the list did not hold).
+not active is not stopped (``overruns`` counts the steps where that was possible;
+``missed_contacts`` — brute-force check at the end of such a step — the pairs in contact
+that the list did not hold).
 
 Statistics (per grain, race-free): grain–grain collisions begun (a pair of grains that
 goes from no touching component pair to at least one; Σ/2 = collisions), the largest
@@ -192,6 +193,8 @@ def default_skin(dt: float, impact_speed: float) -> float:
     is built afresh every step, so unlike the sphere list (engine/stepping.default_skin,
     kept across steps) it need not cover a step's travel: that is in each grain's reach."""
     return max(0.1, 2.0 * impact_speed * dt)
+
+
 # slots of ClusterContacts.counters (engine/composites.py reports them by these names)
 LIST_BUILDS = 0  # component neighbour-list builds
 OVERRUNS = 1  # grains that moved further than the list's skin allowed
@@ -680,7 +683,7 @@ def _poses(sr, wr, cr, s, dt):
 
 @njit(cache=True, no_cfunc_wrapper=True, _nrt=False)
 def _pose_grains(st, w, cc, lo, hi, s, dt):
-    """_pose_one of active grains lo..hi-1 (one compiled copy of it; "The sub-step passes")."""
+    """_pose_one of active grains lo..hi-1 (one compiled copy of it; module docstring, "Cost")."""
     for q in range(lo, hi):
         _pose_one(st, w, cc, cc.act[q], s, dt)
 
@@ -912,11 +915,11 @@ def _kick_one(st, cc, p, k):
     cc.dL[p, 2] += t2
 
 
-# The sub-step passes: a range of active grains per
-# call of a kernel compiled without reference counting (_nrt=False), the per-grain kernels
-# inlined into it. A per-grain kernel called once per grain and sub-step costs, per call,
-# the passing of the three tuples (~60 arrays, some 500 words pushed on the stack) and,
-# from a reference-counted caller, an atomic increment and decrement of every array.
+# The sub-step passes (module docstring, "Cost"): a range of active grains per call of a
+# kernel compiled without reference counting (_nrt=False), the per-grain kernels inlined
+# into it. A per-grain kernel called once per grain and sub-step costs, per call, the
+# passing of the three tuples (~60 arrays, some 500 words pushed on the stack) and, from a
+# reference-counted caller, an atomic increment and decrement of every array.
 @njit(cache=True, no_cfunc_wrapper=True, _nrt=False)
 def _move_grains(st, w, cc, lo, hi, h, half_skin, sig, dt):
     """Half kick and drift of active grains lo..hi-1, then their poses at σ (a grain's pose
