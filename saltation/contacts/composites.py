@@ -99,8 +99,8 @@ farthest a contact can deflect a grain within one step, 2 v_impact Δt (0.4 Dn a
 defaults): the list is built afresh every step, so it need not cover a step's travel,
 as the sphere list must. Still, every engaged grain is sub-stepped through the whole step
 with n_sub set by the lightest point-effective mass (421 sub-steps per 0.02 step against
-128 for spheres): at 2.07 % the phase is ~20× the spheres' per grain-step; the sphere
-phase's joining late and retiring (contacts/phase.py) are not done here.
+128 for spheres): at 2.07 % the phase is ~27× the spheres' per grain-step (the whole step
+~20×); the sphere phase's joining late and retiring (contacts/phase.py) are not done here.
 
 The packed bed (bed.model = "packed", ``with_packed_bed``)
 ----------------------------------------------------------
@@ -130,10 +130,10 @@ flight's RK4 (spin × Δt of 3–4 rad) diverges: non-finite after 0.09 s at 1.0
 0.33 s at 2.07 %. At 1.03 % it did so before the sub-step passes were restructured
 (bb70cfd: the same step, the same grain). At Δt = 0.01 and 0.005 the 2.07 % run lasted
 1.5 s, with largest overlaps of 0.19 and 0.046 Dn and jump statistics that differ by
-~24 % (H, L) between the two: not converged. A soft floor in the sub-steps for the engaged grains (a
-normal spring–dashpot at the bed top, as the packed bed's spheres) was tried: with it
-the 2.07 % run at 0.02 got through the 0.35 s tried but still had overlaps of 0.13 Dn;
-not kept. The packed bed, whose spheres are in the sub-steps, ran 1 s at 2.07 %.
+~24 % (H, L) between the two: not converged. A soft floor in the sub-steps for the
+engaged grains (a normal spring–dashpot at the bed top, as the packed bed's spheres) was
+tried: with it the 2.07 % run at 0.02 got through the 0.35 s tried but still had
+overlaps of 0.13 Dn; not kept. The packed bed, whose spheres are in the sub-steps, ran 1 s at 2.07 %.
 Also: a grain deflected by more than the engagement margin s towards a grain that was
 not active is not stopped (``overruns`` counts the steps where that was possible;
 ``missed_contacts`` — brute-force check at the end of such a step — the pairs in contact
@@ -998,7 +998,6 @@ def _force_kick_ser(sr, cr, h, sig):
 
 @njit(cache=True, no_cfunc_wrapper=True, _nrt=False, inline="always")
 def _drift_one(st, cc, p, h, half_skin):
-    cc.iw[p]
     rot = cc.rot[p]
     w0, w1, w2 = cc.dOm[p, 0], cc.dOm[p, 1], cc.dOm[p, 2]
     # body frame of the free path: R_f = R(Q) R(δq)ᵀ; R_fᵀ δΩ = R(δq) R(Q)ᵀ δΩ

@@ -344,7 +344,7 @@ class ClusterSimulation(Simulation):
 
     def _known_failure(self) -> str:
         """What is known to make a run of this kind fail (contacts/composites.py, "Known gaps")."""
-        if not (self.contacts and not self.packed):
+        if not self.contacts or self.packed:
             return ""
         return ("; a known problem of bonded-sphere grains with soft contacts on the virtual bed: contacts "
                 "push grains below the bed top, which is not part of the contact sub-steps, and their "
