@@ -117,24 +117,39 @@ soft bed contacts from step to step instead of the hard rebound and push-out of
 bed/packed_composites.py, which would make it bounce in its hollow every step. That
 pass skips every active grain. Jumps as there: the first bed contact after at least
 one step off the bed is a bed impact and ends a jump; while the contact lasts, the next
-jump's start moves with the grain. (The virtual bed stays in the free flight, hard.)
+jump's start moves with the grain.
 
-Known gaps: on the virtual bed the bed is not part of the sub-steps (the free flight
-has already applied the rebound; a grain pushed below the bed top by a contact is
-lifted back by the next free-flight step). **This makes dense runs on the virtual bed
-fail**: the natural mixture at 1.03 % and 2.07 % in a 0.024 × 0.012 m box (seed 1,
-dt = 0.02) pushes grains up to 0.3 Dn below the bed top within a step; the lift-out puts
-them into their neighbours (component overlaps jump to 0.05–0.16 Dn in one step, against
-the ≤ 1 % the stiffness is set for) and spins them up to 150–220 u*/Dn, where the free
-flight's RK4 (spin × Δt of 3–4 rad) diverges: non-finite after 0.09 s at 1.03 % and
-0.33 s at 2.07 %. At 1.03 % it did so before the sub-step passes were restructured
-(bb70cfd: the same step, the same grain). At Δt = 0.01 and 0.005 the 2.07 % run lasted
-1.5 s, with largest overlaps of 0.19 and 0.046 Dn and jump statistics that differ by
-~24 % (H, L) between the two: not converged. A soft floor in the sub-steps for the
-engaged grains (a normal spring–dashpot at the bed top, as the packed bed's spheres) was
-tried: with it the 2.07 % run at 0.02 got through the 0.35 s tried but still had
-overlaps of 0.13 Dn; not kept. The packed bed, whose spheres are in the sub-steps, ran 1 s at 2.07 %.
-Also: a grain deflected by more than the engagement margin s towards a grain that was
+The virtual bed (bed.model = "virtual", ``with_virtual_bed``)
+--------------------------------------------------------------
+With contacts the free flight leaves the virtual bed alone (bed[BED_MODEL] =
+flight.composites.BED_VIRTUAL_AFTER), as the sphere engine does (contacts/phase.py, "The
+bed in the contact phase"). A grain that is sub-stepped has its bed contacts inside the
+sub-steps: when a component's bottom first goes below the bed top, a virtual bed sphere of
+diameter 1 is placed under it along a normal drawn as the hard virtual bed draws it
+(bed.virtual.virtual_bed_normal from the component centre's velocity, its own
+counter-based draw; vertical if the component does not descend), touching the component
+with its depth below the bed top as overlap, and kept until that contact ends; the contact
+law and the jump bookkeeping are the packed bed's. Every grain whose free path can reach
+the bed top is sub-stepped (``ClusterContacts.below``), whether or not it can reach another
+grain: the lowest component bottom of its start or end pose, less the centre's bulge
+(D_i − chord) and the sag of a component's arc about the slerp axis, ρ_i (1 − cos φ_i/2),
+is below the bed top. A tumbling grain whose tip dips into the bed within the step and
+leaves it by the step's end is among them. So every bed contact of a run with contacts
+is soft, and which grains have it does not depend on the engagement margin or the list's
+skin. The other grains' free paths stay above the bed top; the free flight's bed check
+still runs for them after the phase (flight.composites.virtual_bed_pass: it keeps their
+highest point for the jump height, and would rebound a grain whose end pose lay below
+the bed top by a rounding). A grain resting on the bed is therefore
+sub-stepped every step (as on the packed bed); the cost of a dilute run with contacts
+rises by the sub-steps of the grains at the bed in each step.
+Before (the bed in the free flight only), contacts pushed grains up to 0.3 Dn below the
+bed top within a step and the next free flight lifted them out into their neighbours:
+component overlaps of 0.05–0.16 Dn in one step, spins of 150–220 u*/Dn, and a free-flight
+RK4 that diverged (non-finite after 0.09 s at 1.03 % and 0.33 s at 2.07 % in a
+0.024 × 0.012 m box, Δt = 0.02), with jump statistics that differed by ~24 % between
+Δt = 0.01 and 0.005 where it ran (CHANGELOG).
+
+Known gap: a grain deflected by more than the engagement margin s towards a grain that was
 not active is not stopped (``overruns`` counts the steps where that was possible;
 ``missed_contacts`` — brute-force check at the end of such a step — the pairs in contact
 that the list did not hold).
@@ -154,7 +169,9 @@ from numba import njit, prange
 
 from ..bed.jumps import close_jump
 from ..bed.packed import BED_CENTRE_Y, bed_cell, bed_offset
+from ..bed.virtual import BED_MODEL, virtual_bed_normal
 from ..flight.composites import (
+    BED_VIRTUAL_AFTER,
     CHUNK,
     OK,
     ClusterState,
@@ -167,15 +184,17 @@ from ..flight.composites import (
     free_flight_pass,
     highest_on_path,
     state_row,
+    virtual_bed_pass,
 )
 from ..flight.path import hermite_weights
 from ..grains.refs import as_tuple, struct_ref
 from ..io.progress import wall_clock
 from ..physics.contact_law import spring_dashpot
 from ..physics.history import history_mark_impact
+from ..physics.rng import uniform2
 from .cells import axis_index, axis_span, grid_shape, min_image, sort_points, stencil_cell
 
-__all__ = ["ClusterContacts", "compile_jobs", "make_cluster_contacts", "with_packed_bed", "contact_parameters", "substeps", "contact_phase",
+__all__ = ["ClusterContacts", "compile_jobs", "make_cluster_contacts", "with_packed_bed", "with_virtual_bed", "contact_parameters", "substeps", "contact_phase",
            "build_contact_list", "as_refs", "contacts_of",
            "advance_clusters_contacts", "component_forces", "brute_force_pairs", "listed_pairs",
            "point_effective_masses", "DEFAULT_SKIN", "default_skin"]
@@ -247,12 +266,19 @@ class ClusterContacts(NamedTuple):
     counters: np.ndarray  # (N_COUNTERS,) int64
     # the packed bed's spheres as fixed partners (module docstring, "The packed bed")
     bed_centres: np.ndarray  # (M, 3) bed sphere centres (Dn); (0, 3) without a packed bed
-    bed_par: np.ndarray  # (4,) ζ_bed, f_bed, shortest jump duration, lowest jump height (bed/jumps.py)
+    bed_par: np.ndarray  # (5,) ζ_bed, f_bed, shortest jump duration, lowest jump height (bed/jumps.py), max tilt
     step_t: np.ndarray  # (2,) start time t and length Δt of the step being taken (Dn/u*)
     step_index: np.ndarray  # (1,) int64 global index of that step
     last_contact: np.ndarray  # (N,) int64 last step with bed contact (shared with bed/packed_composites.py)
     in_bed: np.ndarray  # (N,) uint8 touching a bed sphere at the last evaluation
     bed_touch: np.ndarray  # (N,) uint8 touched a bed sphere in this step
+    # the virtual bed in the sub-steps (module docstring, "The virtual bed", ``with_virtual_bed``):
+    # one bed sphere under each component that reached the bed top; (0,) without
+    vslot: np.ndarray  # (K,) uint8 component touches its virtual bed sphere
+    vcentre: np.ndarray  # (K, 3) that sphere's centre (Dn)
+    vshear: np.ndarray  # (K, 3) its tangential spring ξ
+    bed_seed: np.ndarray  # (1,) int64 run.seed: the normals' draws (physics/rng.py)
+    below: np.ndarray  # (N,) uint8 on the virtual bed: the free path ends below the bed top
 
 
 ClusterContactsRefType, ClusterContactsRef = struct_ref(ClusterContacts, __name__)  # grains/refs.py
@@ -340,8 +366,9 @@ def make_cluster_contacts(st, par, capacity: int = 32) -> ClusterContacts:
         np.zeros(n), np.zeros(n), np.zeros((n, 13)), z3(n), z3(n), z3(n), np.zeros((n, 4)), np.zeros(n),
         z3(n), z3(n), z3(n), z3(n), np.zeros((n, 3, 3)), np.zeros((n, 3, 3)), z3(kt), z3(n), z3(n),
         np.zeros(n, np.int64), np.zeros(n), np.zeros(n), np.zeros(n, np.int64), np.zeros(N_COUNTERS, np.int64),
-        np.zeros((0, 3)), np.zeros(4), np.zeros(2), np.zeros(1, np.int64), np.full(n, -2, np.int64),
-        np.zeros(n, np.uint8), np.zeros(n, np.uint8))
+        np.zeros((0, 3)), np.zeros(5), np.zeros(2), np.zeros(1, np.int64), np.full(n, -2, np.int64),
+        np.zeros(n, np.uint8), np.zeros(n, np.uint8),
+        np.zeros(0, np.uint8), np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(1, np.int64), np.zeros(n, np.uint8))
 
 
 def with_packed_bed(cc: ClusterContacts, pb, restitution: float, friction: float, jump_limits,
@@ -350,8 +377,24 @@ def with_packed_bed(cc: ClusterContacts, pb, restitution: float, friction: float
     fixed partners of the sub-steps: bed restitution and friction, the jump thresholds
     (shortest duration, lowest height; bed/jumps.py) and the engine's ``last_contact``
     array (N,) int64, which the hard bed pass shares."""
-    par = np.array([damping_factor(restitution), float(friction), float(jump_limits[0]), float(jump_limits[1])])
+    par = np.array([damping_factor(restitution), float(friction), float(jump_limits[0]), float(jump_limits[1]), 0.0])
     return cc._replace(bed_centres=np.ascontiguousarray(pb.centres), bed_par=par, last_contact=last_contact)
+
+
+def with_virtual_bed(cc: ClusterContacts, restitution: float, friction: float, max_tilt: float, jump_limits,
+                     last_contact, seed: int) -> ClusterContacts:
+    """The contact state with the virtual bed in the sub-steps (module docstring, "The
+    virtual bed"): bed restitution, friction and largest tilt of the normal (rad), the jump
+    thresholds (bed/jumps.py), the engine's ``last_contact`` array (N,) int64, which the
+    hard pass after the phase (flight.composites.virtual_bed_pass) shares, and run.seed.
+    The free flight must then leave the bed to that pass (bed[BED_MODEL] =
+    flight.composites.BED_VIRTUAL_AFTER)."""
+    k = cc.grain_of.shape[0]
+    par = np.array([damping_factor(restitution), float(friction), float(jump_limits[0]), float(jump_limits[1]),
+                    float(max_tilt)])
+    return cc._replace(bed_par=par, last_contact=last_contact, vslot=np.zeros(k, np.uint8),
+                       vcentre=np.zeros((k, 3)), vshear=np.zeros((k, 3)),
+                       bed_seed=np.array([int(seed)], np.int64))
 
 
 # ----------------------------------------------------------------------------- small kernels
@@ -390,9 +433,19 @@ def _reach_one(st, w, cc, p, dt):
         ub = (x1[i] - x0[i]) / dt
         b0 += (x0[3 + i] - ub) ** 2
         b1 += (x1[3 + i] - ub) ** 2
-    cc.reach[p] = chord + 0.25 * dt * (math.sqrt(b0) + math.sqrt(b1))
+    reach = chord + 0.25 * dt * (math.sqrt(b0) + math.sqrt(b1))
+    cc.reach[p] = reach
     dot = abs(x0[6] * x1[6] + x0[7] * x1[7] + x0[8] * x1[8] + x0[9] * x1[9])
     cc.phi[p] = 2.0 * math.acos(min(1.0, dot))
+    if cc.vslot.shape[0] > 0:
+        # virtual bed: a grain whose free path can reach the bed top is sub-stepped, with its
+        # bed contact soft (module docstring, "The virtual bed"). A component's bottom lies
+        # above the chord between its ends less the centre's bulge (reach − chord) and the
+        # sag of its arc about the slerp axis, |r| (1 − cos φ/2) ≤ ρ (1 − cos φ/2)
+        low0, _ = _lowest(st, w, p, x0[0], x0[1], x0[2], x0[6], x0[7], x0[8], x0[9])
+        low1, _ = _lowest(st, w, p, x1[0], x1[1], x1[2], x1[6], x1[7], x1[8], x1[9])
+        sag = (reach - chord) + cc.rho[p] * (1.0 - math.cos(0.5 * cc.phi[p]))
+        cc.below[p] = 1 if min(low0, low1) - sag < 0.0 else 0
 
 
 @njit(cache=True, no_cfunc_wrapper=True, parallel=True)
@@ -464,6 +517,12 @@ def _engage(sr, wr, cr):
     if 2.0 * (rmax + dmax) + skin > 0.5 * min(box[0], box[2]):
         cc.counters[OVERRUNS] += 1  # cells capped at half the box: counted as an overrun
     _engage_pass(pos, st.status, cc.rho, cc.reach, skin, box, gn, size, start, count, order, ids, cc.active)
+    if cc.vslot.shape[0] > 0:
+        # on the virtual bed every bed contact is soft: a grain ending below the bed top is
+        # sub-stepped, whether or not it can reach another grain (module docstring)
+        for q in range(m):
+            if cc.below[ids[q]] != 0:
+                cc.active[ids[q]] = 1
     if cc.bed_centres.shape[0] > 0:
         # a grain resting or rolling on the packed bed (bed contact in the last step) whose
         # path can reach the bed again keeps its soft bed contacts (module docstring)
@@ -482,6 +541,9 @@ def _engage(sr, wr, cr):
             cc.in_bed[p] = 0
             for a in range(st.cstart[p], st.cstart[p + 1]):
                 cc.nbr_count[a] = 0
+            if cc.vslot.shape[0] > 0:  # its bed contacts are the hard pass's now
+                for a in range(st.cstart[p], st.cstart[p + 1]):
+                    cc.vslot[a] = 0
     cc.n_act[0] = k
     for q in range(k):
         p = cc.act[q]
@@ -778,29 +840,43 @@ def _grain_force(st, cc, p, h, sig):
     npart = 0
     nbed = 0
     mp = st.mass[p]
+    virtual = cc.vslot.shape[0] > 0
     for a in range(st.cstart[p], st.cstart[p + 1]):
         da = st.d_comp[a]
-        for k in range(cc.nbr_count[a]):
-            b = cc.nbr[a, k]
-            if b >= 0:  # a component of grain g
-                g = cc.grain_of[b]
-                cb = cc.cp[b]
-                db = st.d_comp[b]
-            else:  # bed sphere −1 − b: fixed, diameter 1
+        nk = cc.nbr_count[a]
+        for k in range(nk + 1 if virtual else nk):  # the listed partners, then the virtual bed
+            if k == nk:  # the virtual bed sphere under component a (module docstring, "The virtual bed")
+                if cc.vslot[a] == 0:
+                    if not update or cc.cp[a, 1] >= 0.5 * da:
+                        continue
+                    _place_virtual(st, cc, p, a)
                 g = -1
-                cb = cc.bed_centres[-1 - b]
+                cb = cc.vcentre[a]
                 db = 1.0
+                sh = cc.vshear[a]
+            else:
+                b = cc.nbr[a, k]
+                if b >= 0:  # a component of grain g
+                    g = cc.grain_of[b]
+                    cb = cc.cp[b]
+                    db = st.d_comp[b]
+                else:  # bed sphere −1 − b: fixed, diameter 1
+                    g = -1
+                    cb = cc.bed_centres[-1 - b]
+                    db = 1.0
+                sh = cc.shear[a, k]
             dsum = 0.5 * (da + db)
             delx = min_image(cc.cp[a, 0] - cb[0], lx, 1)
             dely = cc.cp[a, 1] - cb[1]
             delz = min_image(cc.cp[a, 2] - cb[2], lz, 1)
             rsq = delx * delx + dely * dely + delz * delz
-            sh = cc.shear[a, k]
             if rsq >= dsum * dsum or rsq == 0.0:
                 if update:
                     sh[0] = 0.0
                     sh[1] = 0.0
                     sh[2] = 0.0
+                    if k == nk:
+                        cc.vslot[a] = 0  # the contact ended: the sphere goes
                 continue
             r = math.sqrt(rsq)
             n0, n1, n2 = delx / r, dely / r, delz / r
@@ -884,6 +960,36 @@ def _grain_force(st, cc, p, h, sig):
             if cc.in_bed[p] == 0:
                 _bed_impact(st, cc, p, cc.step_t[0] + sig * cc.step_t[1])
         cc.in_bed[p] = 1 if nbed > 0 else 0
+
+
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False, inline="always")
+def _place_virtual(st, cc, p, a):
+    """Component a of grain p has reached the bed top: a virtual bed sphere (diameter 1,
+    fixed) is placed under it along a normal drawn as the hard virtual bed draws it
+    (bed.virtual.virtual_bed_normal, from the component centre's velocity; vertical when it
+    does not descend), touching it with the component's depth below the bed top as overlap
+    (module docstring, "The virtual bed")."""
+    u = cc.vshear[a]  # scratch for the velocity; the spring starts at zero below
+    r0 = cc.cp[a, 0] - cc.P[p, 0]
+    r1 = cc.cp[a, 1] - cc.P[p, 1]
+    r2 = cc.cp[a, 2] - cc.P[p, 2]
+    om = cc.Om[p]
+    u[0] = cc.V[p, 0] + om[1] * r2 - om[2] * r1
+    u[1] = cc.V[p, 1] + om[2] * r0 - om[0] * r2
+    u[2] = cc.V[p, 2] + om[0] * r1 - om[1] * r0
+    nrm = cc.vcentre[a]  # the normal first, then the centre
+    # a draw of its own: counter-based on (seed, N + component, the grain's bed contacts)
+    xi1, xi2 = uniform2(cc.bed_seed[0], st.pos.shape[0] + a, st.impacts[p])
+    virtual_bed_normal(u, xi1, xi2, cc.bed_par[4], nrm)
+    dist = 0.5 * (st.d_comp[a] + 1.0) - (0.5 * st.d_comp[a] - cc.cp[a, 1])
+    n0, n1, n2 = nrm[0], nrm[1], nrm[2]
+    cc.vcentre[a, 0] = cc.cp[a, 0] - dist * n0
+    cc.vcentre[a, 1] = cc.cp[a, 1] - dist * n1
+    cc.vcentre[a, 2] = cc.cp[a, 2] - dist * n2
+    u[0] = 0.0
+    u[1] = 0.0
+    u[2] = 0.0
+    cc.vslot[a] = 1
 
 
 @njit(cache=True, no_cfunc_wrapper=True, inline="always")
@@ -1180,6 +1286,8 @@ def advance_clusters_contacts(f, coef, bed, seed, st, w, hc, t0, dt, n_steps, to
     cap = st.jump_buf.shape[1]
     k0 = round(t0 / dt)  # the global index of the first step (t0 is always k0 * dt)
     sr, wr, cr = as_refs(st, w, cc)
+    after = bed[BED_MODEL] == BED_VIRTUAL_AFTER  # the virtual bed after the phase
+    moved = np.zeros(n, np.uint8)
     for s in range(n_steps):
         t = (k0 + s) * dt  # from the global step index: never from where a chunk began
         c0 = wall_clock()
@@ -1190,13 +1298,20 @@ def advance_clusters_contacts(f, coef, bed, seed, st, w, hc, t0, dt, n_steps, to
             if st.status[p] != OK:
                 bad = True
                 break
+        c3 = c2 = c1
         if not bad:
             cr.step_t[0] = t
             cr.step_t[1] = dt
             cr.step_index[0] = k0 + s
             contact_phase(sr, wr, cr, dt, n_sub, pb, threads)
-        c2 = wall_clock()
-        timers[0] += c1 - c0
+            c2 = wall_clock()
+            if after:
+                # the grains the phase did not move keep their free paths and get the hard bed
+                for p in range(n):
+                    moved[p] = cr.active[p] & cr.touched[p]
+                virtual_bed_pass(f, coef, bed, seed, st, w, hc, t, dt, k0 + s, moved, cr.last_contact)
+            c3 = wall_clock()
+        timers[0] += (c1 - c0) + (c3 - c2)
         timers[1] += c2 - c1
         stop = bad
         for p in range(n):

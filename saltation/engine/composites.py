@@ -38,7 +38,10 @@ Dn, contact_phase), ``timing.particle_collisions_s`` the wall time of the contac
 particles.parquet the collisions and largest overlap of each grain.
 
 Bed: the virtual bed (flight/composites.py, inside the free-flight kernel, so the timing has no
-separate bed share: ``timing.bed_s`` = 0, said in ``timing.note``) or, with
+separate bed share: ``timing.bed_s`` = 0, said in ``timing.note``; with soft contacts every
+grain whose path can reach the bed top is sub-stepped and has its bed contacts there, as
+soft contacts with a virtual bed sphere, and the free flight's bed check runs after the
+phase for the others: contacts/composites.py, "The virtual bed") or, with
 bed.model = "packed", the hexagonal layer of fixed spheres of diameter Dn acting on
 every component sphere (bed/packed_composites.py, a pass after each step, timed as bed_s);
 with soft contacts the grains sub-stepped in the contact phase — among them every grain
@@ -130,14 +133,17 @@ class ClusterSimulation(Simulation):
         self._setup_run(case, flow, out, progress, resume, stop_after_steps, notice)
         self._saved = None  # a checkpoint's contact and bed arrays, restored by _start
         self.packed = case.bed.model == "packed"
-        self.bed = run_bed_parameters(case, self.coef, self.dt, clusters.BED_PACKED if self.packed else 0.0)
+        # soft contacts: between grains, and on the bed for the grains sub-stepped
+        self.contacts = case.collisions.model == "soft" and (self.n > 1 or self.packed)
+        # the bed: packed (bed/packed_composites.py), or virtual — in the free flight, or with
+        # contacts in the sub-steps and after them (contacts/composites.py, "The virtual bed")
+        model = clusters.BED_PACKED if self.packed else clusters.BED_VIRTUAL_AFTER if self.contacts else 0.0
+        self.bed = run_bed_parameters(case, self.coef, self.dt, model)
         self.pb = None  # packed bed (bed/packed_composites.py), built with the state
         self.last_contact = np.full(self.n, -2, np.int64)
         self.bed_s = 0.0
         self.classes, self.axes, self.composites = draw_grains(case, self.n)
         self.class_id = np.array([CLASS_IDS[c] for c in self.classes], dtype=np.int8)
-        # soft contacts: between grains, and on the packed bed for the grains sub-stepped
-        self.contacts = case.collisions.model == "soft" and (self.n > 1 or self.packed)
         self.cc = None
         self.n_sub = 1
         self.timers = np.zeros(2)
@@ -183,11 +189,13 @@ class ClusterSimulation(Simulation):
         except ValueError as err:
             raise CaseError(str(err), "run", "domain") from err
         self.n_sub = cluster_contacts.substeps(st, kn, self.dt, cc.steps_per_contact)
+        b = self.bed  # bed/virtual.run_bed_parameters: e, f, max tilt, ..., the jump thresholds
+        limits = (b[BED_MIN_JUMP_DURATION], b[BED_MIN_JUMP_HEIGHT])
         if self.packed:
-            b = self.bed  # bed/virtual.run_bed_parameters: e, f, ..., the jump thresholds
-            self.cc = cluster_contacts.with_packed_bed(self.cc, self.pb, b[0], b[1],
-                                                       (b[BED_MIN_JUMP_DURATION], b[BED_MIN_JUMP_HEIGHT]),
-                                                       self.last_contact)
+            self.cc = cluster_contacts.with_packed_bed(self.cc, self.pb, b[0], b[1], limits, self.last_contact)
+        else:
+            self.cc = cluster_contacts.with_virtual_bed(self.cc, b[0], b[1], b[2], limits, self.last_contact,
+                                                        int(c.run.seed))
         self.mu_min = float(cluster_contacts.point_effective_masses(st).min())
 
     def _advance_composites(self, f, st, w, seed, t0, n):
@@ -291,8 +299,8 @@ class ClusterSimulation(Simulation):
             self.last_contact[:] = saved["last_contact"]
             self.timers[:] = saved["timers"]
             self.bed_s = float(saved["bed_s"][0])
-        if self.cc is not None and self.packed:
-            # the bed pass and the contact phase share one last_contact array
+        if self.cc is not None:
+            # the hard bed pass and the contact phase share one last_contact array
             self.cc = self.cc._replace(last_contact=self.last_contact)
 
     def _advance(self, f, st, ws, t0, n, step0) -> int:
@@ -310,9 +318,12 @@ class ClusterSimulation(Simulation):
 
         def jobs():
             setup, substeps = cluster_contacts.compile_jobs(st, ws, self.cc, self.dt, self.n_sub, self.pb)
-            flight = (clusters.free_flight_pass, (f, self.coef, self.bed, seed, st, ws, self.hist_coef, t0, self.dt,
-                                                  self.top_d))
-            return [(k, typed(*a)) for k, a in substeps], [(k, typed(*a)) for k, a in setup + [flight]]
+            flight = [(clusters.free_flight_pass, (f, self.coef, self.bed, seed, st, ws, self.hist_coef, t0, self.dt,
+                                                   self.top_d))]
+            if not self.packed:  # the virtual bed after the contact phase
+                flight.append((clusters.virtual_bed_pass, (f, self.coef, self.bed, seed, st, ws, self.hist_coef, t0,
+                                                           self.dt, 0, np.zeros(self.n, np.uint8), self.last_contact)))
+            return [(k, typed(*a)) for k, a in substeps], [(k, typed(*a)) for k, a in setup + flight]
 
         cold_start.compile_split(cluster_contacts.advance_clusters_contacts,
                                  self._contact_step_args(f, st, ws, seed, t0, 0), jobs)
@@ -340,16 +351,7 @@ class ClusterSimulation(Simulation):
         raise SimulationError(
             f"grain {p} ({self.classes[p]}) became non-finite during step {step_base + steps_done}: position "
             f"{st.pos[p].tolist()}, velocity {st.vel[p].tolist()}, angular velocity "
-            f"{st.omega[p].tolist()}; outputs up to here are kept in {self.out}" + self._known_failure())
-
-    def _known_failure(self) -> str:
-        """What is known to make a run of this kind fail (contacts/composites.py, "Known gaps")."""
-        if not self.contacts or self.packed:
-            return ""
-        return ("; a known problem of bonded-sphere grains with soft contacts on the virtual bed: contacts "
-                "push grains below the bed top, which is not part of the contact sub-steps, and their "
-                "lift-out spins them up until the free flight's RK4 fails (spin x dt of a few radians). "
-                "bed.model = \"packed\" keeps the bed in the sub-steps; a smaller run.dt_particle delays it")
+            f"{st.omega[p].tolist()}; outputs up to here are kept in {self.out}")
 
     # ------------------------------------------------------------------ outputs
     def _write_particles(self, st):
@@ -513,7 +515,11 @@ class ClusterSimulation(Simulation):
     def _timing(self, wall, compile_s, kernel_s, threads):
         bed_s = self.bed_s
         where = ("the packed bed: its own pass after each step (bed/packed_composites.py), bed_s" if self.packed else
-                 "bed rebounds are computed inside the free-flight kernel (flight.composites.step_grain)")
+                 "bed rebounds are computed inside the free-flight kernel (flight.composites.step_grain)"
+                 if self.cc is None else
+                 "the virtual bed: soft bed contacts in the contact phase for every grain whose path can reach "
+                 "it (in particle_collisions_s), the free flight's bed check after it for the others (in "
+                 "free_flight_s)")
         if self.cc is None:
             return {"wall_s": wall, "compile_s": compile_s, "kernel_s": kernel_s, "free_flight_s": kernel_s - bed_s,
                     "bed_s": bed_s, "particle_collisions_s": 0.0, "threads": threads, "note": where}

@@ -64,7 +64,8 @@ CHECKPOINT = CHECKPOINT_NAME  # "checkpoint.npz" (io/run_directory.py)
 # 3: the Basset history keeps slip steps (history.N_JUMPS slots in hist_meta, hist_tail)
 # 4: composites' contact state holds the packed bed's soft contacts (contacts/composites.py)
 # 5: hist_meta holds the pending slip step's age, and the ages in ticks (physics/history.py)
-CHECKPOINT_FORMAT = 5
+# 6: composites' contact state holds the virtual bed's soft contacts (contacts/composites.py)
+CHECKPOINT_FORMAT = 6
 PARTS = ".parts"  # checkpointable Parquet parts, merged into jumps/tracks.parquet at the end
 CHUNK_STEPS = 200  # longest stretch between two chunk ends (how soon a signal is honoured)
 # besides every output.checkpoint_every s of wall time: a checkpoint each time the run has

@@ -87,6 +87,9 @@ is the highest elevation of the grain's lowest point above the bed top.
 
 With bed.model = "packed" (``bed[BED_MODEL] = BED_PACKED``) step_grain leaves the bed
 alone and bed/packed_composites.py applies the hexagonal layer of fixed spheres after the move.
+With grain–grain contacts on the virtual bed (``BED_VIRTUAL_AFTER``) it leaves it alone too:
+the grains whose path can reach the bed top have soft bed contacts in the contact phase,
+and ``virtual_bed_pass`` runs the check above (``virtual_bed_check``) for the others after it.
 
 Grain–grain contacts between composites are not in this module: contacts/composites.py
 acts on the component spheres of different grains after each free-flight step
@@ -139,8 +142,11 @@ from .path import first_below, hermite_point
 
 NX = 13  # x(3) v(3) q(4) Ω(3)
 SQRT_PI = math.sqrt(math.pi)
-# bed[BED_MODEL] (bed/virtual.py): 0 → the virtual bed here; BED_PACKED → bed/packed_composites.py
+# bed[BED_MODEL] (bed/virtual.py): 0 → the virtual bed here, in step_grain; BED_PACKED →
+# bed/packed_composites.py; BED_VIRTUAL_AFTER → the virtual bed after the contact phase
+# (virtual_bed_pass, for the grains that phase did not move: contacts/composites.py)
 BED_PACKED = 1.0
+BED_VIRTUAL_AFTER = 2.0
 # wake shielding of a component by an upstream component of the same grain (docstring)
 WAKE_A = 0.5  # drag deficit of a trailing sphere touching its leader, on the axis
 WAKE_LENGTH = 6.0  # recovery length of the deficit, in the leader's diameters
@@ -1097,8 +1103,18 @@ def step_grain(f, coef, bed, seed, st, w, hc, p, t, dt):
     st.fresh[p] = 1
     if with_basset:
         _basset_end_step(coef, st, w, hc, p, dt)
-    if bed.shape[0] > BED_MODEL and bed[BED_MODEL] == BED_PACKED:
-        return  # the packed bed acts after the move (bed/packed_composites.py)
+    if bed.shape[0] > BED_MODEL and bed[BED_MODEL] != 0.0:
+        return  # the bed acts after the move (bed/packed_composites.py, virtual_bed_pass)
+    virtual_bed_check(f, coef, bed, seed, st, w, hc, p, t, dt)
+
+
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False, error_model="numpy")
+def virtual_bed_check(f, coef, bed, seed, st, w, hc, p, t, dt):
+    """The virtual bed for grain p at the end of its free-flight step from the row
+    ``w.x0[p]`` to its state (module docstring, "Bed"): a rebound when its lowest point is
+    below the bed top, else its highest point on the path kept for the jump height.
+    Returns whether it touched the bed."""
+    x0 = w.x0[p]
     y_new, kb = _lowest(st, w, p, st.pos[p, 0], st.pos[p, 1], st.pos[p, 2], st.quat[p, 0], st.quat[p, 1],
                         st.quat[p, 2], st.quat[p, 3])
     if y_new < 0.0:
@@ -1118,9 +1134,9 @@ def step_grain(f, coef, bed, seed, st, w, hc, p, t, dt):
             st.fresh[p] = 0
             if vy < 0.0:
                 _bed_impact(f, coef, hc, st, w, p, t, dt, False, kb, bed, seed)
-            y_new = 0.0
-    else:
-        st.jump_ymax[p] = max(st.jump_ymax[p], y_new, highest_on_path(st, w, p, dt))
+        return True
+    st.jump_ymax[p] = max(st.jump_ymax[p], y_new, highest_on_path(st, w, p, dt))
+    return False
 
 
 # A parallel pass over the grains runs over chunks of CHUNK grains; each chunk reads the
@@ -1152,6 +1168,25 @@ def free_flight_pass(f, coef, bed, seed, st, w, hc, t, dt, top):
             step_grain(f, coef, bed, seed, sv, wv, hc, p, t, dt)
             if pos[p, 1] > top:
                 above_top[p] += 1
+
+
+@njit(cache=True, no_cfunc_wrapper=True, parallel=True)
+def virtual_bed_pass(f, coef, bed, seed, st, w, hc, t, dt, step, moved, last_contact):
+    """The virtual bed after the contact phase (bed[BED_MODEL] = BED_VIRTUAL_AFTER): the
+    rebound of ``virtual_bed_check`` for every grain that is OK and was not moved by the
+    contact phase (``moved[p]`` = 0: it keeps its free-flight path of the step, from
+    ``w.x0[p]``); a grain that touched the bed gets ``last_contact[p]`` = ``step``, as a
+    soft bed contact in that phase would."""
+    status = st.status
+    sr, wr = ClusterStateRef(*st), ClusterWorkRef(*w)
+    n = status.shape[0]
+    for c in prange((n + CHUNK - 1) // CHUNK):
+        sv, wv = as_tuple(sr, ClusterState), as_tuple(wr, ClusterWork)
+        for p in range(*chunk_range(c, n)):
+            if status[p] != OK or moved[p] != 0:
+                continue
+            if virtual_bed_check(f, coef, bed, seed, sv, wv, hc, p, t, dt):
+                last_contact[p] = step
 
 
 @njit(cache=True, no_cfunc_wrapper=True, error_model="numpy")
