@@ -68,10 +68,10 @@ Scheme inside the hydrodynamic step (operator split after the free flight, as co
    m_a = D_i + |r_a| φ_i the reach of component a (φ_i the slerp angle). A grain whose
    deviation (|δx| + ρ_i ∫|δΩ| dt) exceeds s/2 is counted in ``overruns`` and the list is
    rebuilt at the current sub-step (history carried over by partner id).
-4. A grain that touched another one gets (x₁ + δx, v₁ + δv, q₁ ⊗ δq, Ω₁ + I_w⁻¹ δL), its
-   fluid re-sampled and its Basset history restarted (as contacts/phase.py and a bed impact:
-   a contact is an impulsive velocity change). The others keep the RK4 result bit for
-   bit.
+4. A grain that touched another one gets (x₁ + δx, v₁ + δv, q₁ ⊗ δq, Ω₁ + I_w⁻¹ δL), plus
+   the fluid's response to the change ("Fluid response"), its fluid re-sampled and its
+   Basset history restarted (as contacts/phase.py and a bed impact: a contact is an
+   impulsive velocity change). The others keep the RK4 result bit for bit.
 
 Accuracy: within a contact the scheme is velocity Verlet (second order in h); the split
 with the free flight adds a first-order error in Δt where the free path turns the
@@ -81,6 +81,23 @@ off-centre collision of a spinning rod and blade: kinetic energy after/before �
 1e-4 to 1e-3 at Δt = 0.0025–0.01 d/u*, either sign, and not reduced by more sub-steps
 (it is 0 to round-off for grains that do not spin; angular and linear momentum are
 conserved to round-off whatever the spin).
+
+Fluid response
+--------------
+The sub-steps hold the fluid force of the free path: after a contact the grain flies on to
+the step's end with the fluid force of its old velocity and spin, where that of the new
+ones would have acted — an error first order in Δt (contacts/fluid_response.py for
+spheres: a grain leaving the bed keeps the drag of its descent). A grain that touched
+something (a grain or the bed) gets, after the phase, M⁻¹ (W(new) − W(free)) τ added to its
+velocity and angular velocity: W the fluid's force and torque (flight.composites._rhs: drag,
+lift, Magnus, spin drag, added mass, with the fluid sampled at the free path's end and the
+history held) at its new and at its free-flight end velocity and spin, both at the free
+path's end pose (the secant of the force law), M the generalized mass with added mass (no
+gyroscopic terms: the free rotation from the new spin is not the fluid's), and τ = (δx · δv)/|δv|²
+clamped to [0, Δt] the time since the contact (exact for one impulsive contact, where
+δx = δv τ). Its position would move by ½ Δa τ², left alone so that no grain is pushed into
+a neighbour. The Basset history restarts as before (its slip step dated at the step's
+end, not at the contact as for spheres).
 
 Cost
 ----
@@ -180,6 +197,7 @@ from ..flight.composites import (
     ClusterWorkRef,
     _lowest,
     _quat_to_matrix,
+    _rhs,
     chunk_range,
     free_flight_pass,
     highest_on_path,
@@ -1130,17 +1148,71 @@ def _drift_one(st, cc, p, h, half_skin):
 
 
 @njit(cache=True, no_cfunc_wrapper=True, parallel=True)
-def _finish(sr, wr, cr):
+def _finish(sr, wr, cr, coef):
     """End state of the grains that touched another one (module docstring, step 4)."""
     n = cr.n_act[0]
     for c in prange((n + CHUNK - 1) // CHUNK):
         sv, wv, cv = _views(sr, wr, cr)
         for q in range(*chunk_range(c, n)):
-            _finish_one(sv, wv, cv, cv.act[q])
+            _finish_one(sv, wv, cv, cv.act[q], coef)
+
+
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False, inline="always")
+def _fluid_response(coef, st, w, cc, p):
+    """The fluid's response to grain p's contacts over the rest of the step (module
+    docstring, "Fluid response"): its velocity and angular velocity change by
+    M⁻¹ (W(new) − W(free)) τ, W the fluid's force and torque on it (flight.composites._rhs,
+    fluid sampled at the free path's end, history held) at its new and its free-flight end
+    velocity and spin, M the generalized mass, τ = (δx · δv)/|δv|² the time since the contact."""
+    dt = cc.step_t[1]
+    uu = 0.0
+    xu = 0.0
+    for i in range(3):
+        uu += cc.dv[p, i] * cc.dv[p, i]
+        xu += cc.dx[p, i] * cc.dv[p, i]
+    if uu == 0.0:
+        return
+    tau = min(max(xu / uu, 0.0), dt)
+    x1 = cc.x1[p]
+    xa = w.x[p]  # scratch: the free flight is done with it for a grain the phase moved
+    for i in range(13):
+        xa[i] = x1[i]
+    for i in range(3):
+        xa[3 + i] = st.vel[p, i]
+        xa[10 + i] = st.omega[p, i]
+    # the fluid's force and torque (world) at the new and at the free velocities; their
+    # difference through the generalized mass (with added mass), without the rigid body's
+    # gyroscopic terms, which the free rotation from the new spin is not
+    held = w.aug[p, 0]  # scratch
+    rot = w.rot[p]
+    _quat_to_matrix(x1[6], x1[7], x1[8], x1[9], rot)  # the free path's end pose (w.rw: its sampling)
+    _rhs(coef, st, w, p, xa, w.k[p, 0], False)
+    for i in range(6):
+        held[i] = w.ft[p, i]
+    _rhs(coef, st, w, p, x1, w.k[p, 1], False)
+    body = w.vec[p]
+    for i in range(3):
+        body[i] = _body_difference(rot, i, held, w.ft[p], 0)
+        body[3 + i] = _body_difference(rot, i, held, w.ft[p], 3)
+    mi = st.mmat_inv[p]
+    for i in range(6):
+        acc = 0.0
+        for j in range(6):
+            acc += mi[i, j] * body[j]
+        body[6 + i] = acc
+    for i in range(3):
+        st.vel[p, i] += tau * (rot[i, 0] * body[6] + rot[i, 1] * body[7] + rot[i, 2] * body[8])
+        st.omega[p, i] += tau * (rot[i, 0] * body[9] + rot[i, 1] * body[10] + rot[i, 2] * body[11])
+
+
+@njit(cache=True, no_cfunc_wrapper=True, _nrt=False, inline="always")
+def _body_difference(rot, i, a, b, o):
+    """(Rᵀ (a − b))_i of the 3-vectors a[o:o+3], b[o:o+3] (world → body frame)."""
+    return rot[0, i] * (a[o] - b[o]) + rot[1, i] * (a[o + 1] - b[o + 1]) + rot[2, i] * (a[o + 2] - b[o + 2])
 
 
 @njit(cache=True, no_cfunc_wrapper=True, _nrt=False)
-def _finish_one(st, w, cc, p):
+def _finish_one(st, w, cc, p, coef):
     if cc.touched[p] != 0:
         x1 = cc.x1[p]
         dq = cc.dq[p]
@@ -1166,6 +1238,7 @@ def _finish_one(st, w, cc, p):
             st.pos[p, i] = x1[i] + cc.dx[p, i]
             st.vel[p, i] = x1[3 + i] + cc.dv[p, i]
             st.omega[p, i] = iw[i, 0] * l0 + iw[i, 1] * l1 + iw[i, 2] * l2
+        _fluid_response(coef, st, w, cc, p)
         # the fluid samples are stale and the contact is impulsive: re-sample, restart
         # the Basset memory (as a bed impact)
         st.fresh[p] = 0
@@ -1209,7 +1282,7 @@ def build_contact_list(sr, wr, cr, dt, pb):
 
 
 @njit(cache=True, no_cfunc_wrapper=True, inline="always")  # inlined: one level less for the step to re-link (compile time)
-def contact_phase(sr, wr, cr, dt, n_sub, pb, threads=1):
+def contact_phase(sr, wr, cr, dt, n_sub, pb, coef, threads=1):
     """Grain–grain contacts (and, with a packed bed ``pb``, soft bed contacts; None: none)
     of one hydrodynamic step of length dt, after the free flight of every grain (module
     docstring; cr.step_t and cr.step_index name the step). The state, work and contact
@@ -1243,10 +1316,10 @@ def contact_phase(sr, wr, cr, dt, n_sub, pb, threads=1):
             _force_kick_ser(sr, cr, h, sig)
         s += 1
     cr.counters[SUBSTEPPED] += na * n_sub
-    _finish(sr, wr, cr)
+    _finish(sr, wr, cr, coef)
 
 
-def compile_jobs(st, w, cc, dt, n_sub, pb):
+def compile_jobs(st, w, cc, dt, n_sub, pb, coef):
     """``contact_phase``'s kernel tree in two lists of (kernel, arguments as contact_phase
     passes them), for a first run's compile on two cores (engine/cold_start.py): (set-up:
     reach and neighbour list; sub-steps: poses, engagement, forces, moves, kicks,
@@ -1262,7 +1335,7 @@ def compile_jobs(st, w, cc, dt, n_sub, pb):
     substeps = [(_poses, (sr, wr, cr, 0.0, dt)), (_engage, (sr, wr, cr)), (component_forces, (sr, cr, h, 0.0)),
                 (_move_par, step), (_substeps_ser, (sr, wr, cr, 0, n_sub, h, 0.5 * cc.par[4], dt)),
                 (_force_kick_par, (sr, cr, h, 1.0, 2)),
-                (_force_kick_ser, (sr, cr, h, 1.0)), (_finish, (sr, wr, cr))]
+                (_force_kick_ser, (sr, cr, h, 1.0)), (_finish, (sr, wr, cr, coef))]
     return setup, substeps
 
 
@@ -1303,7 +1376,7 @@ def advance_clusters_contacts(f, coef, bed, seed, st, w, hc, t0, dt, n_steps, to
             cr.step_t[0] = t
             cr.step_t[1] = dt
             cr.step_index[0] = k0 + s
-            contact_phase(sr, wr, cr, dt, n_sub, pb, threads)
+            contact_phase(sr, wr, cr, dt, n_sub, pb, coef, threads)
             c2 = wall_clock()
             if after:
                 # the grains the phase did not move keep their free paths and get the hard bed

@@ -317,7 +317,7 @@ class ClusterSimulation(Simulation):
         seed, t0, typed = int(self.case.run.seed), 0.0, cold_start.typed
 
         def jobs():
-            setup, substeps = cluster_contacts.compile_jobs(st, ws, self.cc, self.dt, self.n_sub, self.pb)
+            setup, substeps = cluster_contacts.compile_jobs(st, ws, self.cc, self.dt, self.n_sub, self.pb, self.coef)
             flight = [(clusters.free_flight_pass, (f, self.coef, self.bed, seed, st, ws, self.hist_coef, t0, self.dt,
                                                    self.top_d))]
             if not self.packed:  # the virtual bed after the contact phase
