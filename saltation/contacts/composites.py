@@ -296,7 +296,7 @@ class ClusterContacts(NamedTuple):
     vcentre: np.ndarray  # (K, 3) that sphere's centre (Dn)
     vshear: np.ndarray  # (K, 3) its tangential spring ξ
     bed_seed: np.ndarray  # (1,) int64 run.seed: the normals' draws (physics/rng.py)
-    below: np.ndarray  # (N,) uint8 on the virtual bed: the free path ends below the bed top
+    below: np.ndarray  # (N,) uint8 on the virtual bed: the free path can reach the bed top (_reach_one)
 
 
 ClusterContactsRefType, ClusterContactsRef = struct_ref(ClusterContacts, __name__)  # grains/refs.py
@@ -536,8 +536,8 @@ def _engage(sr, wr, cr):
         cc.counters[OVERRUNS] += 1  # cells capped at half the box: counted as an overrun
     _engage_pass(pos, st.status, cc.rho, cc.reach, skin, box, gn, size, start, count, order, ids, cc.active)
     if cc.vslot.shape[0] > 0:
-        # on the virtual bed every bed contact is soft: a grain ending below the bed top is
-        # sub-stepped, whether or not it can reach another grain (module docstring)
+        # on the virtual bed every bed contact is soft: a grain whose path can reach the bed
+        # top is sub-stepped, whether or not it can reach another grain (module docstring)
         for q in range(m):
             if cc.below[ids[q]] != 0:
                 cc.active[ids[q]] = 1
