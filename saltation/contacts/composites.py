@@ -198,9 +198,11 @@ from ..flight.composites import (
     _lowest,
     _quat_to_matrix,
     _rhs,
+    body_loads,
     chunk_range,
     free_flight_pass,
     highest_on_path,
+    solve_generalized_mass,
     state_row,
     virtual_bed_pass,
 )
@@ -395,8 +397,14 @@ def with_packed_bed(cc: ClusterContacts, pb, restitution: float, friction: float
     fixed partners of the sub-steps: bed restitution and friction, the jump thresholds
     (shortest duration, lowest height; bed/jumps.py) and the engine's ``last_contact``
     array (N,) int64, which the hard bed pass shares."""
-    par = np.array([damping_factor(restitution), float(friction), float(jump_limits[0]), float(jump_limits[1]), 0.0])
-    return cc._replace(bed_centres=np.ascontiguousarray(pb.centres), bed_par=par, last_contact=last_contact)
+    return cc._replace(bed_centres=np.ascontiguousarray(pb.centres), bed_par=_bed_par(restitution, friction, jump_limits),
+                       last_contact=last_contact)
+
+
+def _bed_par(restitution, friction, jump_limits, max_tilt=0.0):
+    """ClusterContacts.bed_par: ζ_bed, f_bed, the jump thresholds, the largest tilt (rad)."""
+    return np.array([damping_factor(restitution), float(friction), float(jump_limits[0]), float(jump_limits[1]),
+                     float(max_tilt)])
 
 
 def with_virtual_bed(cc: ClusterContacts, restitution: float, friction: float, max_tilt: float, jump_limits,
@@ -408,9 +416,7 @@ def with_virtual_bed(cc: ClusterContacts, restitution: float, friction: float, m
     The free flight must then leave the bed to that pass (bed[BED_MODEL] =
     flight.composites.BED_VIRTUAL_AFTER)."""
     k = cc.grain_of.shape[0]
-    par = np.array([damping_factor(restitution), float(friction), float(jump_limits[0]), float(jump_limits[1]),
-                    float(max_tilt)])
-    return cc._replace(bed_par=par, last_contact=last_contact, vslot=np.zeros(k, np.uint8),
+    return cc._replace(bed_par=_bed_par(restitution, friction, jump_limits, max_tilt), last_contact=last_contact, vslot=np.zeros(k, np.uint8),
                        vcentre=np.zeros((k, 3)), vshear=np.zeros((k, 3)),
                        bed_seed=np.array([int(seed)], np.int64))
 
@@ -1187,28 +1193,17 @@ def _fluid_response(coef, st, w, cc, p):
     rot = w.rot[p]
     _quat_to_matrix(x1[6], x1[7], x1[8], x1[9], rot)  # the free path's end pose (w.rw: its sampling)
     _rhs(coef, st, w, p, xa, w.k[p, 0], False)
+    ft = w.ft[p]
     for i in range(6):
-        held[i] = w.ft[p, i]
+        held[i] = ft[i]
     _rhs(coef, st, w, p, x1, w.k[p, 1], False)
-    body = w.vec[p]
-    for i in range(3):
-        body[i] = _body_difference(rot, i, held, w.ft[p], 0)
-        body[3 + i] = _body_difference(rot, i, held, w.ft[p], 3)
-    mi = st.mmat_inv[p]
     for i in range(6):
-        acc = 0.0
-        for j in range(6):
-            acc += mi[i, j] * body[j]
-        body[6 + i] = acc
+        ft[i] = held[i] - ft[i]
+    body_loads(rot, ft)
+    solve_generalized_mass(st, p, rot, ft)
     for i in range(3):
-        st.vel[p, i] += tau * (rot[i, 0] * body[6] + rot[i, 1] * body[7] + rot[i, 2] * body[8])
-        st.omega[p, i] += tau * (rot[i, 0] * body[9] + rot[i, 1] * body[10] + rot[i, 2] * body[11])
-
-
-@njit(cache=True, no_cfunc_wrapper=True, _nrt=False, inline="always")
-def _body_difference(rot, i, a, b, o):
-    """(Rᵀ (a − b))_i of the 3-vectors a[o:o+3], b[o:o+3] (world → body frame)."""
-    return rot[0, i] * (a[o] - b[o]) + rot[1, i] * (a[o + 1] - b[o + 1]) + rot[2, i] * (a[o + 2] - b[o + 2])
+        st.vel[p, i] += tau * ft[18 + i]
+        st.omega[p, i] += tau * ft[21 + i]
 
 
 @njit(cache=True, no_cfunc_wrapper=True, _nrt=False)

@@ -576,8 +576,7 @@ def _accelerations(st, w, p, x, ft):
     # body-frame Ω and loads
     for i in range(3):
         ob[i] = rot[0, i] * x[10] + rot[1, i] * x[11] + rot[2, i] * x[12]
-        ft[6 + i] = rot[0, i] * ft[0] + rot[1, i] * ft[1] + rot[2, i] * ft[2]
-        ft[9 + i] = rot[0, i] * ft[3] + rot[1, i] * ft[4] + rot[2, i] * ft[5]
+    body_loads(rot, ft)
     s = st.s_am[p]
     it = st.i_total[p]
     # − ω × (ω × S)
@@ -594,6 +593,21 @@ def _accelerations(st, w, p, x, ft):
     ft[9] -= ob[1] * l2 - ob[2] * l1
     ft[10] -= ob[2] * l0 - ob[0] * l2
     ft[11] -= ob[0] * l1 - ob[1] * l0
+    solve_generalized_mass(st, p, rot, ft)
+
+
+@njit(cache=True, no_cfunc_wrapper=True, inline="always", error_model="numpy", _nrt=False)
+def body_loads(rot, ft):
+    """ft[0:6] = world force and torque → ft[6:12] the same in the body frame (rot: R)."""
+    for i in range(3):
+        ft[6 + i] = rot[0, i] * ft[0] + rot[1, i] * ft[1] + rot[2, i] * ft[2]
+        ft[9 + i] = rot[0, i] * ft[3] + rot[1, i] * ft[4] + rot[2, i] * ft[5]
+
+
+@njit(cache=True, no_cfunc_wrapper=True, inline="always", error_model="numpy", _nrt=False)
+def solve_generalized_mass(st, p, rot, ft):
+    """ft[6:12] = body-frame loads of grain p → ft[12:18] its body (a, α) through the
+    generalized mass (with added mass) → ft[18:24] the same in the world frame."""
     mi = st.mmat_inv[p]
     for i in range(6):
         acc = 0.0
