@@ -13,7 +13,13 @@ in two bands of larger hops, because the finest steps resolve micro-hops (0.01�
 high, a step or two long) that a coarse step merges into one bed-contact episode.
 
     PYTHONPATH=. python benchmarks/study_mixture_dt.py --out /tmp/saltation-studies/mixture_dt \
-        [--dts 0.02 0.01 0.005] [--conc 2.07] [--duration 2.0] [--spinup 20]
+        [--dts 0.02 0.01 0.005] [--conc 2.07] [--duration 2.0] [--spinup 20] [--seeds 1 2 3] \
+        [--off basset lift ...] [--shape sphere]
+
+``--seeds``: the runs of every seed pooled (jumps; the jackknife over the grains of all
+seeds) and each seed's collision rate with its ratio to the coarsest dt's; ``--off``: the
+named [forces] switched off in every run, to find which force a dt dependence comes from;
+``--shape``: another particle.shape in the same runs (``sphere``: the sphere engine).
 
 A rerun skips the dts whose run directory holds a completed summary.json.
 """
@@ -28,12 +34,13 @@ import numpy as np
 import pandas as pd
 
 import saltation
+from saltation.case.schema import SHAPES
 
 BANDS = ((None, None), (0.1, 0.05), (0.3, 0.1))  # (H ≥, T ≥); None: the coarsest dt's definition
 
 
-def case(conc: float, domain, duration: float, dt: float, bed: str) -> dict:
-    return {"particle": {"diameter": 0.69e-3, "shape": "mixture"}, "flow": {"source": "les", "tau_ratio": 1.79},
+def case(conc: float, domain, duration: float, dt: float, bed: str, shape: str = "mixture") -> dict:
+    return {"particle": {"diameter": 0.69e-3, "shape": shape}, "flow": {"source": "les", "tau_ratio": 1.79},
             "collisions": {"model": "soft"}, "bed": {"model": bed},
             "run": {"concentration": conc / 100, "domain": list(domain), "duration": duration, "dt_particle": dt,
                     "seed": 1, "threads": 1},
@@ -53,6 +60,14 @@ def jackknife(jumps: pd.DataFrame) -> dict:
     return out
 
 
+FORCES = ("lift", "magnus", "added_mass", "fluid_acceleration", "basset", "spin", "wake_shielding")
+
+
+def run_dir(out: Path, dt: float, seed: int, off, shape: str = "mixture") -> Path:
+    tag = ("" if shape == "mixture" else f"{shape}_") + f"dt{dt:g}" + (f"_s{seed}" if seed != 1 else "") + "".join(f"_no-{f}" for f in sorted(off))
+    return out / tag
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", default="/tmp/saltation-studies/mixture_dt")
@@ -62,36 +77,57 @@ def main(argv=None):
     ap.add_argument("--duration", type=float, default=2.0, help="s")
     ap.add_argument("--spinup", type=float, default=20.0, help="d/u*: jumps that start earlier are not counted")
     ap.add_argument("--bed", choices=("virtual", "packed"), default="virtual")
+    ap.add_argument("--seeds", type=int, nargs="+", default=[1],
+                    help="run.seed values: jumps pooled, collision rates per seed and their ratio to the coarsest dt")
+    ap.add_argument("--shape", default="mixture", choices=SHAPES,
+                    help="particle.shape (sphere: the sphere engine, for comparison)")
+    ap.add_argument("--off", nargs="*", default=[], choices=FORCES, metavar="FORCE",
+                    help=f"[forces] switched off in every run (attribution of a dt dependence): {', '.join(FORCES)}")
     a = ap.parse_args(argv)
     runs = {}
     for dt in a.dts:
-        out = Path(a.out) / f"dt{dt:g}"
-        done = out / "summary.json"
-        if not (done.exists() and json.loads(done.read_text()).get("status") == "completed"):
-            t0 = time.perf_counter()
-            saltation.run(case(a.conc, a.domain, a.duration, dt, a.bed), out=out, progress=False, overwrite=True)
-            print(f"dt = {dt:g}: {time.perf_counter() - t0:.0f} s", flush=True)
-        runs[dt] = (json.loads(done.read_text()), pd.read_parquet(out / "jumps.parquet"))
+        for seed in a.seeds:
+            out = run_dir(Path(a.out), dt, seed, a.off, a.shape)
+            done = out / "summary.json"
+            if not (done.exists() and json.loads(done.read_text()).get("status") == "completed"):
+                c = case(a.conc, a.domain, a.duration, dt, a.bed, a.shape)
+                c["run"]["seed"] = seed
+                c["forces"] = {f: False for f in a.off}
+                t0 = time.perf_counter()
+                saltation.run(c, out=out, progress=False, overwrite=True)
+                print(f"dt = {dt:g}, seed {seed}: {time.perf_counter() - t0:.0f} s", flush=True)
+            runs[dt, seed] = (json.loads(done.read_text()), pd.read_parquet(out / "jumps.parquet"))
     coarse = max(a.dts)
-    print(f"\nnatural mixture, C = {a.conc} %, domain {a.domain[0]} x {a.domain[1]} m, {a.bed} bed, soft contacts, "
-          f"{a.duration} s; jumps starting after {a.spinup} d/u*, first 10 per grain dropped")
+    off = f"; forces off: {', '.join(a.off)}" if a.off else ""
+    name = "natural mixture" if a.shape == "mixture" else f"shape {a.shape}"
+    print(f"\n{name}, C = {a.conc} %, domain {a.domain[0]} x {a.domain[1]} m, {a.bed} bed, soft contacts, "
+          f"{a.duration} s, seeds {' '.join(map(str, a.seeds))}{off}; jumps starting after {a.spinup} d/u*, "
+          f"first 10 per grain dropped")
     for h_min, t_min in BANDS:
         h_min, t_min = (0.01, coarse) if h_min is None else (h_min, t_min)
         print(f"\nH >= {h_min:g} d, T >= {t_min:g} d/u*")
         print(f"{'dt':>7s} {'jumps':>7s} {'H (d)':>16s} {'L (d)':>16s} {'U (u*)':>16s} {'T (d/u*)':>16s}")
         for dt in a.dts:
-            j = runs[dt][1]
-            j = j[(~j["discarded"]) & (j["t_start"] >= a.spinup) & (j["height"] >= h_min) & (j["duration"] >= t_min)]
+            parts = []
+            for k, seed in enumerate(a.seeds):  # grains of different seeds are different grains
+                j = runs[dt, seed][1]
+                j = j[(~j["discarded"]) & (j["t_start"] >= a.spinup) & (j["height"] >= h_min)
+                      & (j["duration"] >= t_min)]
+                parts.append(j.assign(particle=j["particle"] + k * 10**9))
+            j = pd.concat(parts)
             s = jackknife(j)
             print(f"{dt:7g} {len(j):7d} " + " ".join(f"{m:9.4f} ± {e:.4f}" for m, e in s.values()))
-    print(f"\n{'dt':>7s} {'n_sub':>6s} {'coll/grain/(d/u*)':>18s} {'bed/grain/(d/u*)':>17s} {'max overlap':>12s} "
-          f"{'free s':>8s} {'contacts s':>11s}")
+    print(f"\n{'dt':>7s} {'seed':>5s} {'n_sub':>6s} {'coll/grain/(d/u*)':>18s} {'ratio':>6s} {'bed/grain/(d/u*)':>17s} "
+          f"{'max overlap':>12s} {'free s':>8s} {'contacts s':>11s}")
     for dt in a.dts:
-        s = runs[dt][0]
-        c, t = s["collisions"], s["timing"]
-        print(f"{dt:7g} {c['soft']['substeps_per_step']:6d} {c['per_particle_per_unit_time']:18.3f} "
-              f"{c['bed_per_particle_per_unit_time']:17.3f} {c['overlap']['max_over_d']:12.4f} "
-              f"{t['free_flight_s']:8.1f} {t['particle_collisions_s']:11.1f}")
+        for seed in a.seeds:
+            s = runs[dt, seed][0]
+            c, t = s["collisions"], s["timing"]
+            base = runs[coarse, seed][0]["collisions"]["per_particle_per_unit_time"]
+            print(f"{dt:7g} {seed:5d} {c['soft']['substeps_per_step']:6d} {c['per_particle_per_unit_time']:18.3f} "
+                  f"{c['per_particle_per_unit_time'] / base:6.3f} {c['bed_per_particle_per_unit_time']:17.3f} "
+                  f"{c['overlap']['max_over_d']:12.4f} {t['free_flight_s']:8.1f} {t['particle_collisions_s']:11.1f}")
+    print("ratio: the collision rate over that of the coarsest dt with the same seed")
 
 
 if __name__ == "__main__":
