@@ -1,8 +1,8 @@
 """Time-step convergence of the natural mixture (bonded-sphere grains) with soft contacts.
 
 Runs ``saltation.run`` on the shipped LES at τ*/τ*c = 1.79 (d = 0.69 mm), the natural
-mixture at --conc % in a --domain box, soft contacts, --bed, one thread, seed 1, for each
-dt in --dts (d/u*), and prints per dt: counted jumps and the mean H (d), L (d), U (u*),
+mixture at --conc % in a --domain box, soft contacts, --bed, one thread, for each seed in
+--seeds (default 1) and each dt in --dts (d/u*), and prints per dt: counted jumps and the mean H (d), L (d), U (u*),
 T (d/u*) with standard errors from a delete-one-grain jackknife (one grain's jumps are
 correlated), grain–grain collisions and bed contacts per grain per d/u*, the largest
 component overlap (Dn) and the wall time.
@@ -26,6 +26,7 @@ A rerun skips the dts whose run directory holds a completed summary.json.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import time
 from pathlib import Path
@@ -34,23 +35,28 @@ import numpy as np
 import pandas as pd
 
 import saltation
-from saltation.case.schema import SHAPES
+from saltation.case.schema import SHAPES, ForcesConfig
 
 BANDS = ((None, None), (0.1, 0.05), (0.3, 0.1))  # (H ≥, T ≥); None: the coarsest dt's definition
 
 
-def case(conc: float, domain, duration: float, dt: float, bed: str, shape: str = "mixture") -> dict:
+def case(conc: float, domain, duration: float, dt: float, bed: str, shape: str = "mixture", seed: int = 1,
+         off=()) -> dict:
+    """The run's case; ``off``: [forces] switches set to false."""
     return {"particle": {"diameter": 0.69e-3, "shape": shape}, "flow": {"source": "les", "tau_ratio": 1.79},
-            "collisions": {"model": "soft"}, "bed": {"model": bed},
+            "collisions": {"model": "soft"}, "bed": {"model": bed}, "forces": {f: False for f in off},
             "run": {"concentration": conc / 100, "domain": list(domain), "duration": duration, "dt_particle": dt,
-                    "seed": 1, "threads": 1},
+                    "seed": seed, "threads": 1},
             "output": {"tracks": False, "vtk": False}}
 
 
 def jackknife(jumps: pd.DataFrame) -> dict:
-    """Mean and standard error of H, L, U, T: delete-one-grain jackknife of Σx/Σn."""
+    """Mean and standard error of H, L, U, T: delete-one-grain jackknife of Σx/Σn (NaN with
+    fewer than two grains, e.g. a band no jump of a short run falls in)."""
     g = jumps.groupby("particle")
     n = g.size().to_numpy().astype(float)
+    if len(n) < 2:
+        return {key: (float("nan"), float("nan")) for key in ("H", "L", "U", "T")}
     out = {}
     for key, col in (("H", "height"), ("L", "length"), ("U", "velocity"), ("T", "duration")):
         tot = g[col].sum().to_numpy()
@@ -60,12 +66,15 @@ def jackknife(jumps: pd.DataFrame) -> dict:
     return out
 
 
-FORCES = ("lift", "magnus", "added_mass", "fluid_acceleration", "basset", "spin", "wake_shielding")
+# the on/off switches of [forces] (case/schema.py)
+FORCES = tuple(f.name for f in dataclasses.fields(ForcesConfig) if isinstance(f.default, bool))
 
 
 def run_dir(out: Path, dt: float, seed: int, off, shape: str = "mixture") -> Path:
-    tag = ("" if shape == "mixture" else f"{shape}_") + f"dt{dt:g}" + (f"_s{seed}" if seed != 1 else "") + "".join(f"_no-{f}" for f in sorted(off))
-    return out / tag
+    """One run's directory: dt<dt>, with _s<seed>, _no-<force> and a <shape>_ prefix where
+    they differ from the default (so the runs of earlier versions of this study are found)."""
+    tag = ("" if shape == "mixture" else f"{shape}_") + f"dt{dt:g}" + (f"_s{seed}" if seed != 1 else "")
+    return out / (tag + "".join(f"_no-{f}" for f in sorted(off)))
 
 
 def main(argv=None):
@@ -90,11 +99,9 @@ def main(argv=None):
             out = run_dir(Path(a.out), dt, seed, a.off, a.shape)
             done = out / "summary.json"
             if not (done.exists() and json.loads(done.read_text()).get("status") == "completed"):
-                c = case(a.conc, a.domain, a.duration, dt, a.bed, a.shape)
-                c["run"]["seed"] = seed
-                c["forces"] = {f: False for f in a.off}
                 t0 = time.perf_counter()
-                saltation.run(c, out=out, progress=False, overwrite=True)
+                saltation.run(case(a.conc, a.domain, a.duration, dt, a.bed, a.shape, seed, a.off), out=out,
+                              progress=False, overwrite=True)
                 print(f"dt = {dt:g}, seed {seed}: {time.perf_counter() - t0:.0f} s", flush=True)
             runs[dt, seed] = (json.loads(done.read_text()), pd.read_parquet(out / "jumps.parquet"))
     coarse = max(a.dts)
