@@ -166,6 +166,11 @@ RK4 that diverged (non-finite after 0.09 s at 1.03 % and 0.33 s at 2.07 % in a
 0.024 × 0.012 m box, Δt = 0.02), with jump statistics that differed by ~24 % between
 Δt = 0.01 and 0.005 where it ran (CHANGELOG).
 
+Known fault, as in contacts/phase.py ("The bed in the contact phase"): a component kept
+on its virtual bed sphere can slide off it and sink below the bed top (a rod settling in
+still water: 0.37 Dn), and the sphere placed after that contact ends throws the grain
+out (155 u* in one step). Not fixed (README, "Known fault").
+
 Known gap: a grain deflected by more than the engagement margin s towards a grain that was
 not active is not stopped (``overruns`` counts the steps where that was possible;
 ``missed_contacts`` — brute-force check at the end of such a step — the pairs in contact

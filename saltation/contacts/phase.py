@@ -91,6 +91,11 @@ may be moved by it by up to twice its reach, which the join test adds to its dis
 margin, so that such a move never pushes it into a grain it was not sub-stepped with.
 Known gap: a grain woken on a deflected path after its own free path went below the bed
 top starts its soft bed contact with that overlap (rare; not counted).
+Known fault (README, "Known fault"): a grain resting or rolling slowly can slide off its
+virtual bed sphere and sink below the bed top while that contact lasts; when it ends, the
+next sphere is placed with the whole depth as overlap and throws the grain out (still
+water: bed overlaps of 0.43 d, speeds of 137 √(gRd); not seen on the LES at τ*/τ*c =
+0.5–1.79). Not fixed; contacts/composites.py places its spheres by the same rule.
 
 Neighbour list (contacts.pairs.ContactList, skin s)
 ---------------------------------------------
